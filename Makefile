@@ -1,0 +1,37 @@
+# The two commands a lab needs: `make demo` and `make test`. Everything else is installed here.
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: venv demo test test-fast lint build bench clean
+
+venv: $(STAMP)
+
+$(STAMP): requirements.txt
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -r requirements.txt
+	touch $(STAMP)
+
+# Bring up three emulated supplies and the coils node, command a rotating field,
+# print per axis what the supplies were told and what they measured.
+demo: $(STAMP)
+	$(PY) scripts/demo_coils.py
+
+# Unit tests, cross-process tests over DDS and the colcon layout check.
+test: $(STAMP)
+	$(PY) -m pytest -q
+
+# Only the tests that need no ROS process (fast inner loop).
+test-fast: $(STAMP)
+	$(PY) -m pytest -q -m "not ros"
+
+build: $(STAMP)
+	cd ros_ws && ../$(VENV)/bin/colcon build --symlink-install
+
+bench: $(STAMP)
+	$(PY) bench/coils_rate.py
+
+clean:
+	rm -rf ros_ws/build ros_ws/install ros_ws/log

@@ -1,0 +1,1 @@
+"""Helmholtz coil driver: field<->current maths, supply wire dialects, coils node."""

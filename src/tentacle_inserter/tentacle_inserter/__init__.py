@@ -1,0 +1,1 @@
+"""Linear insertion axis: stage wire dialects and inserter node."""

@@ -1,0 +1,1 @@
+"""Tentacle statics model, optimiser, schedule files and schedule player."""

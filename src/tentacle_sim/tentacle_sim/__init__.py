@@ -1,0 +1,1 @@
+"""Device emulators on pseudo-terminals and the simulated rig."""

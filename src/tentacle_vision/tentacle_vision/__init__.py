@@ -1,0 +1,1 @@
+"""Image pipeline, camera source and tentacle tracker."""

@@ -1,0 +1,247 @@
+"""One bipolar supply's commands over a SerialLine, in the configured wire dialect.
+
+A supply object is driven by exactly one thread (its channel in coil_bank.py). Every
+exchange has a deadline and a bounded number of attempts; after the last it raises
+SupplyFault with the reason. Currents are in the coil frame: positive means the coil's
+positive field direction; ``polarity_inverted`` flips the sign at the wire for a supply wired
+the other way round.
+"""
+
+import time
+
+from tentacle_coils import dxkdp, scpi
+from tentacle_coils.errors import ConfigError, FrameError, NakError, ReplyTimeout, SupplyFault
+
+_RETRYABLE = (ReplyTimeout, FrameError, NakError)
+
+
+class Supply:
+    """What every dialect provides: connect, output on/off, set and read current."""
+
+    dialect = ''
+
+    def __init__(self, line, *, address=1, polarity_inverted=False, retries=3,
+                 reply_timeout_s=0.1, voltage_limit_v=30.0):
+        """Bind to a line.
+
+        :param line: a SerialLine (opened by the caller)
+        :param address: bus address (dxkdp)
+        :param polarity_inverted: the supply is wired reversed
+        :param retries: attempts after the first before SupplyFault
+        :param reply_timeout_s: how long past the bytes' own wire time to wait for a reply
+        :param voltage_limit_v: compliance voltage programmed at connect (dxkdp)
+        """
+        self.line = line
+        self.address = int(address)
+        self.sign = -1.0 if polarity_inverted else 1.0
+        self.retries = int(retries)
+        self.reply_timeout_s = float(reply_timeout_s)
+        self.voltage_limit_v = float(voltage_limit_v)
+        self.counters = {'commands': 0, 'retries': 0, 'naks': 0, 'timeouts': 0, 'garbled': 0}
+        self.identity = ''
+
+    def _attempts(self, what, attempt):
+        """Run attempt() up to 1 + retries times; count and classify failures."""
+        last = None
+        for n in range(1 + self.retries):
+            if n:
+                self.counters['retries'] += 1
+                # Let a late or garbled reply finish before the next try reads.
+                self.line.discard_input(quiet_s=self.reply_timeout_s / 4)
+            self.counters['commands'] += 1
+            try:
+                return attempt()
+            except NakError as exc:
+                self.counters['naks'] += 1
+                last = exc
+            except ReplyTimeout as exc:
+                self.counters['timeouts'] += 1
+                last = exc
+            except FrameError as exc:
+                self.counters['garbled'] += 1
+                last = exc
+        raise SupplyFault(f'{self.line.path}: {what} failed after {1 + self.retries} attempts: '
+                          f'{last}')
+
+    def connect(self):
+        """Check the device answers and drive it to zero current; return its identity."""
+        raise NotImplementedError
+
+    def set_output(self, on):
+        """Switch the output on or off."""
+        raise NotImplementedError
+
+    def set_current(self, current_a):
+        """Set the current setpoint (A, coil frame)."""
+        raise NotImplementedError
+
+    def read_current(self):
+        """Return the measured current (A, coil frame)."""
+        raise NotImplementedError
+
+    def check(self, setpoint_a):
+        """Return the problems the device reports with the setpoint it should hold (A).
+
+        An ACK already confirms a dxkdp set, so the base has nothing to check.
+        """
+        return []
+
+
+class DxkdpSupply(Supply):
+    """A Dexing DXKDP unit: binary frames, each set command answered by ACK or NAK.
+
+    ``polarity_mode`` is ``signed`` (second generation: negative current as two's complement)
+    or ``command`` (first generation: polarity set by command 0x24, magnitude by 0x22).
+    """
+
+    dialect = 'dxkdp'
+
+    def __init__(self, line, *, polarity_mode='signed', **kwargs):
+        """Bind to a line; see Supply for the other arguments."""
+        super().__init__(line, **kwargs)
+        if polarity_mode not in ('signed', 'command'):
+            raise ConfigError(f"dxkdp polarity_mode '{polarity_mode}' is not signed or command")
+        self.signed = polarity_mode == 'signed'
+        self._positive = None  # device polarity in command mode; None: unknown
+
+    def _exchange(self, frame):
+        """Send one request; return None for an ACKed set, the reply Frame for a read."""
+        request_bytes, reply_bytes = dxkdp.wire_bytes(frame[2])
+        wait_s = self.line.wire_time_s(request_bytes + reply_bytes) + self.reply_timeout_s
+        code = dxkdp.Code(frame[2])
+
+        def attempt():
+            self.line.write(frame)
+            deadline = time.monotonic() + wait_s
+            if dxkdp.COMMANDS[code].reply_data_len is None:
+                if not dxkdp.parse_ack(self.line.read_exact(1, deadline)[0]):
+                    raise NakError(f'{self.line.path}: {code.name} answered NAK')
+                return None
+            head = self.line.read_exact(4, deadline)
+            if head[0] != dxkdp.HEADER:
+                raise FrameError(f'reply starts {head.hex(" ")}, not AA')
+            reply = dxkdp.decode_frame(head + self.line.read_exact(
+                dxkdp.frame_length(head) - 4, deadline))
+            if (reply.address, reply.code) != (self.address, code):
+                raise FrameError(f'reply from address {reply.address} code {reply.code:02x} '
+                                 f'to a request for address {self.address} code {code:02x}')
+            return reply
+
+        return self._attempts(code.name, attempt)
+
+    def connect(self):
+        """Read the state (presence), program the voltage limit and zero current."""
+        self.line.discard_input()
+        state = dxkdp.parse_reading(self._exchange(dxkdp.read_state(self.address)),
+                                    self.signed)
+        self._positive = None
+        self._exchange(dxkdp.set_voltage(self.address, self.voltage_limit_v))
+        self.set_current(0.0)
+        self.identity = f'dxkdp address {self.address} (output {"on" if state.output_on else "off"})'
+        return self.identity
+
+    def set_output(self, on):
+        """Switch the output on or off."""
+        self._exchange(dxkdp.set_output(self.address, on))
+
+    def set_current(self, current_a):
+        """Set the current setpoint (A, coil frame)."""
+        device_a = self.sign * current_a
+        if self.signed:
+            self._exchange(dxkdp.set_current(self.address, device_a, signed=True))
+            return
+        positive = device_a >= 0
+        if positive != self._positive:
+            self._exchange(dxkdp.set_polarity(self.address, positive, positive))
+            self._positive = positive
+        self._exchange(dxkdp.set_current(self.address, abs(device_a)))
+
+    def read_current(self):
+        """Return the measured current (A, coil frame)."""
+        reading = dxkdp.parse_reading(self._exchange(dxkdp.read_output(self.address)),
+                                      self.signed)
+        device_a = reading.current_a
+        if not self.signed and self._positive is False:
+            device_a = -device_a
+        return self.sign * device_a
+
+
+class ScpiSupply(Supply):
+    """A generic SCPI bipolar supply: set commands get no reply, queries one line each."""
+
+    dialect = 'scpi'
+
+    def _query(self, request, parse):
+        wait_s = self.line.wire_time_s(len(request) + 24) + self.reply_timeout_s
+
+        def attempt():
+            self.line.write(request)
+            return parse(self.line.read_until(scpi.TERMINATOR, time.monotonic() + wait_s))
+
+        return self._attempts(request.decode('ascii').strip(), attempt)
+
+    def connect(self):
+        """Identify the device, drain its error queue and zero the current."""
+        self.line.discard_input()
+        maker, model, serial_no, firmware = self._query(scpi.identify(), scpi.parse_identity)
+        self.poll_errors()
+        self.set_current(0.0)
+        if self.check(0.0):
+            raise SupplyFault(f'{self.line.path}: setpoint did not reach zero at connect')
+        self.identity = f'{maker} {model} s/n {serial_no} fw {firmware}'
+        return self.identity
+
+    def set_output(self, on):
+        """Switch the output on or off and confirm with ``OUTP?``."""
+        self.counters['commands'] += 1
+        self.line.write(scpi.set_output(on))
+        if self._query(scpi.query_output(), scpi.parse_bool) != on:
+            raise SupplyFault(f'{self.line.path}: output did not switch {"on" if on else "off"}')
+
+    def set_current(self, current_a):
+        """Set the current setpoint (A, coil frame); SCPI sends no reply."""
+        self.counters['commands'] += 1
+        self.line.write(scpi.set_current(self.sign * current_a))
+
+    def read_current(self):
+        """Return the measured current (A, coil frame)."""
+        return self.sign * self._query(scpi.measure_current(), scpi.parse_float)
+
+    def read_setpoint(self):
+        """Return the setpoint the device holds (A, coil frame)."""
+        return self.sign * self._query(scpi.query_setpoint(), scpi.parse_float)
+
+    def check(self, setpoint_a):
+        """Return queued device errors, and a setpoint mismatch (set commands get no reply)."""
+        problems = self.poll_errors()
+        held_a = self.read_setpoint()
+        if abs(held_a - setpoint_a) > 1e-4 + 1e-6 * abs(setpoint_a):
+            problems.append(f'device holds {held_a:.4f} A, not {setpoint_a:.4f} A')
+        return problems
+
+    def poll_errors(self, max_entries=8):
+        """Return the queued ``SYST:ERR?`` entries as text, oldest first."""
+        errors = []
+        for _ in range(max_entries):
+            code, text = self._query(scpi.query_error(), scpi.parse_error)
+            if code == 0:
+                break
+            errors.append(f'{code},"{text}"')
+        return errors
+
+
+DIALECTS = {'dxkdp': DxkdpSupply, 'scpi': ScpiSupply}
+
+
+def make_supply(dialect, line, **kwargs):
+    """Return a Supply of the named dialect bound to line.
+
+    :raises ConfigError: an unknown dialect
+    """
+    try:
+        cls = DIALECTS[dialect]
+    except KeyError:
+        raise ConfigError(f"dialect '{dialect}' is not one of {sorted(DIALECTS)}") from None
+    if cls is not DxkdpSupply:
+        kwargs.pop('polarity_mode', None)
+    return cls(line, **kwargs)

@@ -1,0 +1,146 @@
+"""A serial line opened by path, with deadline-bounded reads and line-rate paced writes.
+
+The same class serves a USB-RS232 adapter and a pseudo-terminal; only the path differs.
+"""
+
+import os
+import select
+import time
+
+import serial
+
+from tentacle_coils.errors import LinkLost, ReplyTimeout
+
+BITS_PER_BYTE = 10  # 8N1: start, 8 data, stop
+
+
+class SerialLine:
+    """One serial port.
+
+    Reads take an absolute deadline (``time.monotonic()`` seconds) and raise ReplyTimeout
+    past it. Writes are paced so that the bytes of one write have left the line (at ``baud``)
+    before the next starts: a command that gets no reply then never queues behind stale ones.
+    Any I/O failure raises LinkLost and closes the port.
+    """
+
+    def __init__(self, path, baud):
+        """Remember where and how fast; ``open()`` connects."""
+        self.path = path
+        self.baud = int(baud)
+        self._port = None
+        self._rx = bytearray()
+        self._tx_free_at = 0.0
+
+    def wire_time_s(self, n_bytes):
+        """Return the time n_bytes take on the line (s)."""
+        return n_bytes * BITS_PER_BYTE / self.baud
+
+    @property
+    def is_open(self):
+        """Return True while the port is open."""
+        return self._port is not None
+
+    def open(self):
+        """Open the port (8N1, exclusive).
+
+        :raises LinkLost: the path does not exist or cannot be opened
+        """
+        self.close()
+        try:
+            self._port = serial.Serial(self.path, self.baud, timeout=0, write_timeout=1.0,
+                                       exclusive=True)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise LinkLost(f'cannot open {self.path}: {exc}') from None
+        self._rx.clear()
+        self._tx_free_at = 0.0
+
+    def close(self):
+        """Close the port; safe to call twice."""
+        port, self._port = self._port, None
+        if port is not None:
+            try:
+                port.close()
+            except (serial.SerialException, OSError):
+                pass
+
+    def _require(self):
+        if self._port is None:
+            raise LinkLost(f'{self.path} is not open')
+        return self._port
+
+    def _lost(self, exc):
+        self.close()
+        return LinkLost(f'{self.path}: {exc}')
+
+    def write(self, data):
+        """Send bytes once the previous write has left the line.
+
+        :raises LinkLost: the port failed
+        """
+        port = self._require()
+        wait = self._tx_free_at - time.monotonic()
+        if wait > 0:
+            time.sleep(wait)
+        try:
+            port.write(data)
+        except (serial.SerialException, OSError) as exc:
+            raise self._lost(exc) from None
+        self._tx_free_at = time.monotonic() + self.wire_time_s(len(data))
+
+    def _fill(self, deadline):
+        """Wait until more bytes arrive or the deadline passes; return False on timeout."""
+        port = self._require()
+        remaining = max(0.0, deadline - time.monotonic())  # 0: poll once
+        try:
+            readable, _, _ = select.select([port.fileno()], [], [], remaining)
+            if not readable:
+                return False
+            chunk = os.read(port.fileno(), 4096)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise self._lost(exc) from None
+        if not chunk:
+            raise self._lost('end of file (device gone)')
+        self._rx += chunk
+        return True
+
+    def read_exact(self, n_bytes, deadline):
+        """Return exactly n_bytes.
+
+        :raises ReplyTimeout: fewer arrived by the deadline (the partial bytes are dropped)
+        :raises LinkLost: the port failed
+        """
+        while len(self._rx) < n_bytes:
+            if not self._fill(deadline):
+                got, self._rx = bytes(self._rx), bytearray()
+                raise ReplyTimeout(f'{self.path}: {len(got)} of {n_bytes} bytes by the deadline'
+                                   + (f' ({got.hex(" ")})' if got else ''))
+        out = bytes(self._rx[:n_bytes])
+        del self._rx[:n_bytes]
+        return out
+
+    def read_until(self, terminator, deadline, max_bytes=256):
+        """Return the bytes up to and including terminator.
+
+        :raises ReplyTimeout: no terminator by the deadline, or more than max_bytes without one
+        :raises LinkLost: the port failed
+        """
+        while True:
+            end = self._rx.find(terminator)
+            if end >= 0:
+                end += len(terminator)
+                out = bytes(self._rx[:end])
+                del self._rx[:end]
+                return out
+            if len(self._rx) > max_bytes or not self._fill(deadline):
+                got, self._rx = bytes(self._rx), bytearray()
+                raise ReplyTimeout(f'{self.path}: no complete line by the deadline'
+                                   + (f' (got {got[:40]!r})' if got else ''))
+
+    def discard_input(self, quiet_s=0.0):
+        """Drop buffered and pending input; with quiet_s, until the line is quiet that long.
+
+        :raises LinkLost: the port failed
+        """
+        self._rx.clear()
+        while self._fill(time.monotonic() + quiet_s):
+            self._rx.clear()

@@ -71,6 +71,9 @@ class Channel:
         """Set the target current (A) and/or the wanted output state; returns at once."""
         with self._cond:
             if target_a is not None:
+                if self.target_a == self.sent_a:
+                    # Leaving rest: the slew budget starts now, not at the last send.
+                    self._t_step = time.monotonic()
                 self.target_a = float(target_a)
             if output is not None:
                 self.output_wanted = bool(output)

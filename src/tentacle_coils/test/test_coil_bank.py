@@ -1,0 +1,164 @@
+"""The coil bank against three emulated supplies over real pseudo-terminals."""
+
+import time
+
+import numpy as np
+import pytest
+
+from tentacle_coils.coil_bank import build_bank
+from tentacle_coils.errors import CommandRejected
+
+
+def wait_for(predicate, timeout_s=3.0):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.005)
+    return False
+
+
+@pytest.fixture
+def rig(emulate):
+    """Return a factory: rig(dialect, **bank_kwargs) -> (bank, emulators), bank enabled."""
+    banks = []
+
+    def make(dialect='dxkdp', baud=115200, emulator=None, **kwargs):
+        emus = emulate(dialect, baud=baud, **(emulator or {}))
+        options = {'max_current_a': 10.0, 'slew_rate_a_per_s': 1000.0, 'watchdog_s': 5.0,
+                   'readback_period_s': 0.05, 'reply_timeout_s': 0.03, **kwargs}
+        bank = build_bank([e.port for e in emus], dialect=dialect, baud=baud, **options)
+        bank.start()
+        banks.append(bank)
+        assert wait_for(bank.connected), 'supplies did not connect'
+        assert bank.enable(True)[0]
+        return bank, emus
+
+    yield make
+    for bank in banks:
+        bank.shutdown(timeout_s=1.0)
+
+
+def setpoints(emus):
+    return [emu.state()['setpoint_a'] for emu in emus]
+
+
+def set_entries(emu, since=0.0):
+    return [(e['t'], e['current_a']) for e in emu.log if 'current_a' in e and e['t'] >= since]
+
+
+@pytest.mark.parametrize('dialect', ['dxkdp', 'scpi'])
+def test_each_command_reaches_each_supply(rig, dialect):
+    bank, emus = rig(dialect)
+    bank.command([1.5, -2.25, 3.0])
+    assert wait_for(lambda: setpoints(emus) == [1.5, -2.25, 3.0])
+    assert all(emu.state()['output_on'] for emu in emus)
+    assert wait_for(lambda: np.allclose(bank.measured_currents(), [1.5, -2.25, 3.0],
+                                        atol=0.02))
+
+
+def test_slew_rate_is_never_exceeded(rig):
+    slew = 100.0
+    bank, emus = rig(slew_rate_a_per_s=slew)
+    t_command = time.monotonic()
+    bank.command([5.0, -5.0, 0.0])
+    assert wait_for(lambda: setpoints(emus)[:2] == [5.0, -5.0])
+    for emu in emus[:2]:
+        entries = [(t_command, 0.0)] + set_entries(emu, since=t_command)
+        times, values = np.array(entries).T
+        # Arrival times jitter by about a millisecond around send times.
+        assert np.all(np.abs(np.diff(values)) <= slew * (np.diff(times) + 2e-3))
+        assert times[-1] - t_command >= 5.0 / slew - 2e-3
+        assert len(entries) > 5  # ramped in steps, not jumped
+
+
+def test_rejected_commands_never_reach_the_wire(rig):
+    bank, emus = rig()
+    bank.command([1.0, 1.0, 1.0])
+    assert wait_for(lambda: setpoints(emus) == [1.0, 1.0, 1.0])
+    t_bad = time.monotonic()
+    for bad, reason in (([11.0, 0, 0], 'exceed max_current'), ([np.nan, 0, 0], 'finite'),
+                        ([0, np.inf, 0], 'finite'), ([1.0, 2.0], 'three')):
+        with pytest.raises(CommandRejected, match=reason):
+            bank.command(bad)
+    time.sleep(0.2)
+    assert all(value == 1.0 for emu in emus for _, value in set_entries(emu, since=t_bad))
+
+
+def test_commands_need_enable(rig):
+    bank, emus = rig()
+    assert bank.enable(False)[0]
+    assert wait_for(lambda: not any(emu.state()['output_on'] for emu in emus))
+    with pytest.raises(CommandRejected, match='disabled'):
+        bank.command([1.0, 0, 0])
+
+
+def test_watchdog_ramps_to_zero_and_leaves_outputs_on(rig):
+    bank, emus = rig(watchdog_s=0.3)
+    bank.command([2.0, 2.0, 2.0])
+    assert wait_for(lambda: setpoints(emus) == [2.0, 2.0, 2.0])
+    assert wait_for(lambda: setpoints(emus) == [0.0, 0.0, 0.0], timeout_s=1.0)
+    assert bank.status()[0] == 'warn' and 'watchdog' in bank.status()[1]
+    assert all(emu.state()['output_on'] for emu in emus)
+    bank.command([1.0, 0.0, 0.0])  # a new command resumes
+    assert wait_for(lambda: setpoints(emus)[0] == 1.0)
+
+
+def test_supply_that_stops_answering_zeroes_all_axes_then_recovers(rig):
+    bank, emus = rig(retries=2)
+    bank.command([3.0, 3.0, 3.0])
+    assert wait_for(lambda: setpoints(emus) == [3.0, 3.0, 3.0])
+    emus[1].inject('no_reply', count=3)
+    bank.command([4.0, 4.0, 4.0])
+    assert wait_for(lambda: bank.fault != '')
+    assert 'failed after 3 attempts' in bank.fault
+    assert wait_for(lambda: setpoints(emus) == [0.0, 0.0, 0.0])
+    assert wait_for(lambda: bank.fault == '')  # y answers again and holds zero
+    bank.command([1.0, 1.0, 1.0])
+    assert wait_for(lambda: setpoints(emus) == [1.0, 1.0, 1.0])
+
+
+def test_lost_supply_reconnects_and_is_driven_to_zero_not_its_stale_setpoint(rig):
+    bank, emus = rig()
+    bank.command([2.0, 2.0, 2.0])
+    assert wait_for(lambda: setpoints(emus) == [2.0, 2.0, 2.0])
+    emus[2].inject('disconnect', duration_s=0.5)
+    assert wait_for(lambda: 'link lost' in bank.fault)
+    with pytest.raises(CommandRejected, match='fault'):
+        bank.command([1.0, 1.0, 1.0])
+    assert wait_for(lambda: setpoints(emus)[:2] == [0.0, 0.0])
+    assert emus[2].state()['setpoint_a'] == 2.0  # unplugged: the coil keeps its current
+    assert wait_for(lambda: bank.fault == '', timeout_s=4.0)
+    assert setpoints(emus) == [0.0, 0.0, 0.0]
+    assert bank.channels[2].snapshot()['connected']
+
+
+def test_estop_stops_and_release_needs_a_new_command(rig):
+    bank, emus = rig()
+    bank.command([2.0, -2.0, 2.0])
+    assert wait_for(lambda: setpoints(emus) == [2.0, -2.0, 2.0])
+    bank.set_estop(True)
+    assert wait_for(lambda: setpoints(emus) == [0.0, 0.0, 0.0]
+                    and not any(emu.state()['output_on'] for emu in emus))
+    with pytest.raises(CommandRejected, match='estop'):
+        bank.command([1.0, 1.0, 1.0])
+    bank.set_estop(False)
+    assert wait_for(lambda: all(emu.state()['output_on'] for emu in emus))
+    time.sleep(0.1)
+    assert setpoints(emus) == [0.0, 0.0, 0.0]
+    bank.command([1.0, 1.0, 1.0])
+    assert wait_for(lambda: setpoints(emus) == [1.0, 1.0, 1.0])
+
+
+def test_shutdown_ramps_to_zero_then_switches_off(rig):
+    bank, emus = rig(slew_rate_a_per_s=50.0)
+    bank.command([5.0, 5.0, -5.0])
+    assert wait_for(lambda: setpoints(emus) == [5.0, 5.0, -5.0])
+    t0 = time.monotonic()
+    assert bank.shutdown() is True
+    assert time.monotonic() - t0 >= 5.0 / 50.0 - 2e-3
+    assert setpoints(emus) == [0.0, 0.0, 0.0]
+    assert not any(emu.state()['output_on'] for emu in emus)
+    last_output = [max(e['t'] for e in emu.log if 'output_on' in e) for emu in emus]
+    last_set = [max(t for t, _ in set_entries(emu)) for emu in emus]
+    assert all(o > s for o, s in zip(last_output, last_set))  # zero first, then off

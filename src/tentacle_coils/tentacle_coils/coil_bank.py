@@ -361,7 +361,8 @@ class CoilBank:
             with self._lock:
                 now = time.monotonic()
                 if (self._enabled and not self._watchdog_tripped
-                        and now - self._last_command > self.watchdog_s):
+                        and now - self._last_command > self.watchdog_s
+                        and any(ch.target_a != 0.0 for ch in self.channels)):
                     self._watchdog_tripped = True
                     for channel in self.channels:
                         channel.request(target_a=0.0)
@@ -417,6 +418,8 @@ def build_bank(ports, *, dialect, baud, addresses=(1, 1, 1), polarity_inverted=(
                          ('polarity_inverted', polarity_inverted)):
         if len(values) != 3:
             raise ConfigError(f'{what} needs 3 entries (x, y, z), got {len(values)}')
+    if not all(0 <= a <= 255 for a in addresses):
+        raise ConfigError(f'addresses {list(addresses)} must each be in 0..255')
     channels = []
     for name, port, address, inverted in zip('xyz', ports, addresses, polarity_inverted):
         supply = make_supply(dialect, SerialLine(port, baud), address=address,

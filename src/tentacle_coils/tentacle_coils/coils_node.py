@@ -1,0 +1,236 @@
+"""coils_node: field commands in, three supplies driven, measured currents and field out.
+
+Topics and services (DESIGN.md): /coils/field_cmd (in), /coils/currents, /coils/field,
+/diagnostics (out), /coils/enable (service), /estop (in, transient local). The logic lives in
+field_map.py (maths and limits) and coil_bank.py (supplies, slew, watchdog, safe stop); this
+module only wires it to ROS.
+"""
+
+import logging
+import math
+import sys
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Vector3Stamped
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Bool
+from std_srvs.srv import SetBool
+
+from tentacle_coils.coil_bank import build_bank
+from tentacle_coils.errors import CoilsError, CommandRejected
+from tentacle_coils.field_map import ActuationMap, Limits, plan_currents
+from tentacle_coils.params import COILS_PARAMS, describe
+
+FRAME_ID = 'coils'
+LEVELS = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN,
+          'error': DiagnosticStatus.ERROR}
+
+
+def declare_parameters(node, table):
+    """Declare every row of a parameter table with a descriptor; return {name: value}."""
+    values = {}
+    for p in table:
+        descriptor = ParameterDescriptor(description=p.description, read_only=True)
+        if p.low is not None and isinstance(p.default, float):
+            descriptor.floating_point_range = [FloatingPointRange(
+                from_value=float(p.low), to_value=float(p.high), step=0.0)]
+        elif p.low is not None and isinstance(p.default, int):
+            descriptor.integer_range = [IntegerRange(
+                from_value=int(p.low), to_value=int(p.high), step=1)]
+        values[p.name] = node.declare_parameter(p.name, p.default, descriptor).value
+    return values
+
+
+class RosLogHandler(logging.Handler):
+    """Forward the pure code's Python logging to the node's ROS logger."""
+
+    def __init__(self, ros_logger):
+        """Wrap a ROS logger."""
+        super().__init__()
+        self.ros_logger = ros_logger
+
+    def emit(self, record):
+        """Log one record at the matching ROS severity."""
+        if record.levelno >= logging.ERROR:
+            self.ros_logger.error(self.format(record))
+        elif record.levelno >= logging.WARNING:
+            self.ros_logger.warning(self.format(record))
+        else:
+            self.ros_logger.info(self.format(record))
+
+
+class CoilsNode(Node):
+    """Wire the coil bank to the topic contract."""
+
+    def __init__(self):
+        """Declare parameters, build the bank and start talking to the supplies."""
+        super().__init__('coils_node')
+        p = declare_parameters(self, COILS_PARAMS)
+        self.actuation = ActuationMap(p['actuation_matrix'], p['field_offset'])
+        self.limits = Limits(p['max_current'], p['max_field'], p['clamp'])
+        self.auto_enable = p['auto_enable']
+        self.bank = build_bank(
+            list(p['ports']), dialect=p['dialect'], baud=p['baud'],
+            addresses=list(p['addresses']), polarity_inverted=list(p['polarity_inverted']),
+            polarity_mode=p['polarity_mode'], max_current_a=p['max_current'],
+            slew_rate_a_per_s=p['slew_rate'], watchdog_s=p['watchdog_s'],
+            readback_period_s=1.0 / p['publish_rate'], retries=p['retries'],
+            reply_timeout_s=p['reply_timeout_s'], voltage_limit_v=p['voltage_limit'])
+        self._log_handler = RosLogHandler(self.get_logger())
+        logging.getLogger('tentacle_coils').addHandler(self._log_handler)
+        logging.getLogger('tentacle_coils').setLevel(logging.INFO)
+        self.rejected = 0
+        self.last_rejection = ''
+        self._last_logged = {}
+
+        self.currents_pub = self.create_publisher(Vector3Stamped, '/coils/currents', 10)
+        self.field_pub = self.create_publisher(Vector3Stamped, '/coils/field', 10)
+        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.create_subscription(Vector3Stamped, '/coils/field_cmd', self.on_field_cmd, 10)
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.create_subscription(Bool, '/estop', self.on_estop, latched)
+        self.create_service(SetBool, '/coils/enable', self.on_enable)
+        self.create_timer(1.0 / p['publish_rate'], self.publish_state)
+        self.create_timer(1.0, self.publish_diagnostics)
+        self.bank.start()
+        if self.auto_enable:
+            self._auto_enable_timer = self.create_timer(0.05, self._try_auto_enable)
+        self.get_logger().info(
+            f"coils_node: {p['dialect']} at {p['baud']} baud on {list(p['ports'])}; "
+            f"max {p['max_current']:g} A, {p['max_field'] * 1e3:g} mT, "
+            f"slew {p['slew_rate']:g} A/s, watchdog {p['watchdog_s']:g} s")
+
+    def _try_auto_enable(self):
+        if self.bank.connected() and not self.bank.estopped:
+            ok, message = self.bank.enable(True)
+            if ok:
+                self.get_logger().info(f'auto_enable: {message}')
+                self._auto_enable_timer.cancel()
+
+    def _reject(self, reason):
+        """Count a rejected command and log its reason (once a second per distinct reason)."""
+        self.rejected += 1
+        self.last_rejection = reason
+        now = time.monotonic()
+        if now - self._last_logged.get(reason, -math.inf) >= 1.0:
+            self._last_logged[reason] = now
+            self.get_logger().warning(f'field command rejected: {reason}')
+
+    def on_field_cmd(self, msg):
+        """Validate a field command and hand its currents to the bank."""
+        if msg.header.frame_id != FRAME_ID:
+            self._reject(f"frame_id '{msg.header.frame_id}' is not '{FRAME_ID}'")
+            return
+        try:
+            currents, note = plan_currents((msg.vector.x, msg.vector.y, msg.vector.z),
+                                           self.actuation, self.limits)
+            self.bank.command(currents)
+        except CommandRejected as exc:
+            self._reject(str(exc))
+            return
+        if note:
+            self.get_logger().warning(f'field command clamped: {note}',
+                                      throttle_duration_sec=1.0)
+
+    def on_estop(self, msg):
+        """Engage or release the emergency stop."""
+        if msg.data != self.bank.estopped:
+            self.get_logger().warning('estop ' + ('ENGAGED: ramping to zero, outputs off'
+                                                  if msg.data else 'released'))
+        self.bank.set_estop(msg.data)
+
+    def on_enable(self, request, response):
+        """Energise or de-energise the outputs."""
+        response.success, response.message = self.bank.enable(request.data)
+        if self.auto_enable:
+            self._auto_enable_timer.cancel()  # the operator decides from now on
+        return response
+
+    def _stamped(self, vector):
+        msg = Vector3Stamped()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.frame_id = FRAME_ID
+        msg.vector.x, msg.vector.y, msg.vector.z = (float(v) for v in vector)
+        return msg
+
+    def publish_state(self):
+        """Publish measured currents and the field they make (nothing while any is unknown)."""
+        measured = self.bank.measured_currents()
+        if not all(math.isfinite(v) for v in measured):
+            return
+        self.currents_pub.publish(self._stamped(measured))
+        self.field_pub.publish(self._stamped(self.actuation.field(measured)))
+
+    def publish_diagnostics(self):
+        """Publish one status per supply and one for the bank."""
+        array = DiagnosticArray()
+        array.header.stamp = self.get_clock().now().to_msg()
+        level, message = self.bank.status()
+        bank = DiagnosticStatus(name='coils: bank', hardware_id='coils',
+                                level=LEVELS[level], message=message)
+        bank.values = [KeyValue(key='commands_rejected', value=str(self.rejected)),
+                       KeyValue(key='last_rejection', value=self.last_rejection)]
+        array.status.append(bank)
+        for snap in (ch.snapshot() for ch in self.bank.channels):
+            if not snap['connected']:
+                level, message = 'error', f"disconnected: {snap['last_error']}"
+            elif snap['last_error']:
+                level, message = 'warn', f"last error: {snap['last_error']}"
+            else:
+                level, message = 'ok', 'connected'
+            status = DiagnosticStatus(
+                name=f"coils: supply {snap['axis']}",
+                hardware_id=f"{snap['port']}@{snap['address']}", level=LEVELS[level],
+                message=message)
+            status.values = [KeyValue(key=k, value=str(v)) for k, v in snap.items()]
+            array.status.append(status)
+        self.diag_pub.publish(array)
+
+    def shutdown(self):
+        """Ramp to zero and switch every output off; return True when confirmed."""
+        # The ROS context may be gone already (signal): log the ramp-down to stderr.
+        logger = logging.getLogger('tentacle_coils')
+        logger.removeHandler(self._log_handler)
+        fallback = logging.StreamHandler(sys.stderr)
+        logger.addHandler(fallback)
+        try:
+            return self.bank.shutdown('node exit')
+        finally:
+            logger.removeHandler(fallback)
+
+
+def main(args=None):
+    """Run the node; on exit (Ctrl-C, SIGTERM, error) leave the coils at zero and off."""
+    argv = sys.argv[1:] if args is None else args
+    if '--help' in argv[:argv.index('--ros-args')] if '--ros-args' in argv else '--help' in argv:
+        print('usage: coils_node [--ros-args --params-file FILE | -p NAME:=VALUE ...]\n\n'
+              + __doc__ + '\nparameters:\n' + describe())
+        return
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = CoilsNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except CoilsError as exc:
+        print(f'coils_node: {exc}', file=sys.stderr)
+        sys.exit(2)
+    finally:
+        if node is not None:
+            safe = node.shutdown()
+            print('coils_node: outputs ' + ('zero and off' if safe else
+                                            'NOT confirmed zero and off: check the supplies'),
+                  file=sys.stderr, flush=True)
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,234 @@
+"""The coils node as deployed: its own process, emulated supplies on ptys, DDS topics.
+
+Expected currents come from solving B = A I independently of the node's code (numpy), and
+what reached the wire is read from the emulator's received-bytes log.
+"""
+
+import signal
+import time
+
+from diagnostic_msgs.msg import DiagnosticStatus
+import numpy as np
+import pytest
+
+from conftest import wait_for
+
+pytestmark = pytest.mark.ros
+
+REFERENCE = np.diag([0.53e-3, 1.07e-3, 0.65e-3])  # T/A, config/coils.yaml
+
+
+def expected_currents(field_t, matrix=REFERENCE):
+    return np.linalg.solve(matrix, field_t)
+
+
+def ready(emulators, probe, timeout_s=15.0):
+    """Wait until the node subscribes and has energised the outputs."""
+    assert probe.wait_for_subscriber(timeout_s), 'coils_node did not subscribe'
+    assert wait_for(lambda: all(emulators.outputs()), timeout_s), 'outputs not enabled'
+
+
+def close_to(values, expected, atol):
+    return np.allclose(values, expected, atol=atol)
+
+
+@pytest.mark.parametrize('dialect, baud', [('dxkdp', 9600), ('scpi', 115200)])
+def test_field_command_reaches_each_supply_and_field_agrees(coil_rig, probe, dialect, baud):
+    emulators, node = coil_rig(dialect, baud)
+    ready(emulators, probe)
+    for field in ([5e-3, -8e-3, 3e-3], [-2e-3, 0.0, 12e-3]):
+        currents = expected_currents(field)
+        probe.command_field(field)
+        assert wait_for(lambda: close_to(emulators.setpoints(), currents, 0.0051)), (
+            f'supplies hold {emulators.setpoints()}, expected {currents}')
+        t_settled = time.monotonic() + 0.2  # ten L/R time constants of the emulated coil
+        assert wait_for(lambda: probe.latest(probe.fields, t_settled) is not None)
+        msg = probe.latest(probe.fields, t_settled)
+        assert msg.header.frame_id == 'coils'
+        measured = [msg.vector.x, msg.vector.y, msg.vector.z]
+        # 0.01 A readback resolution (dxkdp) times at most 1.07 mT/A.
+        assert close_to(measured, field, 2e-5), f'/coils/field {measured} vs {field}'
+        cur = probe.latest(probe.currents, t_settled)
+        assert close_to([cur.vector.x, cur.vector.y, cur.vector.z], currents, 0.02)
+
+
+def test_cross_coupled_matrix_and_inverted_supply(coil_rig, probe):
+    matrix = np.array([[0.53e-3, 0.05e-3, 0.0], [-0.04e-3, 1.07e-3, 0.02e-3],
+                       [0.0, 0.03e-3, 0.65e-3]])
+    emulators, node = coil_rig('dxkdp', 115200, actuation_matrix=matrix.ravel().tolist(),
+                               polarity_inverted=[False, True, False])
+    ready(emulators, probe)
+    field = [4e-3, 6e-3, -5e-3]
+    currents = expected_currents(field, matrix)
+    probe.command_field(field)
+    wire = currents * [1, -1, 1]  # y is wired reversed: the wire carries the opposite sign
+    assert wait_for(lambda: close_to(emulators.setpoints(), wire, 0.0051)), (
+        f'{emulators.setpoints()} vs {wire}')
+
+
+def test_rejected_commands_never_reach_the_wire_and_are_logged(coil_rig, probe):
+    emulators, node = coil_rig('dxkdp', 115200, max_current=10.0)
+    ready(emulators, probe)
+    good = [2e-3, 2e-3, 2e-3]
+    probe.command_field(good)
+    assert wait_for(lambda: close_to(emulators.setpoints(), expected_currents(good), 0.0051))
+    t_bad = time.monotonic()
+    bad = [([np.nan, 0, 0], 'coils', 'not three finite'),
+           ([0, np.inf, 0], 'coils', 'not three finite'),
+           ([1e-3, 0, 0], 'world', "frame_id 'world' is not 'coils'"),
+           ([0, 0.03, 0], 'coils', 'exceeds max_field'),
+           ([0.008, 0, 0], 'coils', 'exceeds max_current')]  # 15 A on x > 10 A
+    for field, frame, _ in bad:
+        probe.command_field(field, frame)
+    assert wait_for(lambda: all(reason in node.output() for _, _, reason in bad)), (
+        node.output())
+    time.sleep(0.3)
+    sent = emulators.sets_since(t_bad)
+    for axis, value in zip('xyz', expected_currents(good)):
+        assert all(abs(current - value) < 0.0051 for current in sent[axis]), sent[axis]
+    assert close_to(emulators.setpoints(), expected_currents(good), 0.0051)
+
+
+def test_clamp_scales_an_over_limit_command(coil_rig, probe):
+    emulators, node = coil_rig('dxkdp', 115200, clamp=True)
+    ready(emulators, probe)
+    probe.command_field([0.044, 0.011, 0.0])  # twice max_field on x
+    scaled = expected_currents([0.022, 0.0055, 0.0])  # 41.5 A on x, within 42 A
+    assert wait_for(lambda: close_to(emulators.setpoints(), scaled, 0.0051))
+    assert 'clamped' in node.output()
+
+
+def test_watchdog_ramps_to_zero(coil_rig, probe):
+    emulators, node = coil_rig('dxkdp', 115200, watchdog_s=0.5)
+    ready(emulators, probe)
+    probe.command_field([5e-3, 5e-3, 5e-3])
+    assert wait_for(lambda: emulators.setpoints()[0] > 9.0)
+    t_last = time.monotonic()
+    assert wait_for(lambda: emulators.setpoints() == [0.0, 0.0, 0.0], timeout_s=3.0)
+    assert time.monotonic() - t_last >= 0.4
+    assert 'watchdog' in node.output()
+    assert all(emulators.outputs())  # ramped to zero, still energised
+
+
+def test_estop_and_enable(coil_rig, probe):
+    emulators, node = coil_rig('dxkdp', 115200)
+    ready(emulators, probe)
+    probe.command_field([3e-3, 3e-3, 3e-3])
+    assert wait_for(lambda: emulators.setpoints()[0] > 5.0)
+    probe.estop(True)
+    assert wait_for(lambda: emulators.setpoints() == [0.0] * 3 and not any(emulators.outputs()))
+    probe.command_field([3e-3, 3e-3, 3e-3])
+    assert wait_for(lambda: 'estop active' in node.output())
+    assert emulators.setpoints() == [0.0] * 3
+    assert probe.enable(True).success is False  # cannot energise under estop
+    probe.estop(False)
+    assert wait_for(lambda: all(emulators.outputs()))
+    assert emulators.setpoints() == [0.0] * 3  # nothing moves until a new command
+    response = probe.enable(False)
+    assert response.success
+    assert wait_for(lambda: not any(emulators.outputs()))
+    probe.command_field([1e-3, 0, 0])
+    assert wait_for(lambda: 'outputs disabled' in node.output())
+    assert probe.enable(True).success
+    probe.command_field([1e-3, 0, 0])
+    assert wait_for(lambda: close_to(emulators.setpoints(), expected_currents([1e-3, 0, 0]),
+                                     0.0051))
+
+
+@pytest.mark.parametrize('kind, options', [
+    ('nak', {'count': 2}), ('garble', {'count': 2}), ('late', {'count': 1, 'late_s': 0.15}),
+    ('no_reply', {'count': 2})])
+def test_transient_faults_are_retried_and_the_command_lands(coil_rig, probe, kind, options):
+    emulators, node = coil_rig('dxkdp', 115200)
+    ready(emulators, probe)
+    emulators.fault('y', kind, **options)
+    field = [2e-3, 4e-3, -2e-3]
+    probe.command_field(field)
+    assert wait_for(lambda: close_to(emulators.setpoints(), expected_currents(field), 0.0051))
+    t0 = time.monotonic()
+    assert wait_for(lambda: probe.supply_status('y', t0) is not None)
+    values = {kv.key: kv.value for kv in probe.supply_status('y', t0).values}
+    assert int(values['retries']) >= 1
+    assert node.popen.poll() is None
+
+
+def test_persistent_silence_zeroes_every_axis_and_recovers(coil_rig, probe):
+    emulators, node = coil_rig('dxkdp', 115200, retries=2)
+    ready(emulators, probe)
+    probe.command_field([3e-3, 3e-3, 3e-3])
+    assert wait_for(lambda: emulators.setpoints()[1] > 2.0)
+    emulators.fault('y', 'no_reply', count=3)
+    probe.command_field([4e-3, 4e-3, 4e-3])
+    assert wait_for(lambda: 'failed after 3 attempts' in node.output())
+    assert wait_for(lambda: emulators.setpoints() == [0.0] * 3)  # no stale nonzero current
+    t0 = time.monotonic()
+    assert wait_for(lambda: probe.supply_status('y', t0) is not None)
+    assert wait_for(lambda: 'fault cleared' in node.output())
+    probe.command_field([1e-3, 1e-3, 1e-3])
+    assert wait_for(lambda: close_to(emulators.setpoints(),
+                                     expected_currents([1e-3] * 3), 0.0051))
+
+
+def test_serial_loss_shows_in_diagnostics_reconnects_and_drives_zero(coil_rig, probe):
+    emulators, node = coil_rig('dxkdp', 115200)
+    ready(emulators, probe)
+    probe.command_field([3e-3, 3e-3, 3e-3])
+    assert wait_for(lambda: emulators.setpoints()[2] > 4.0)
+    emulators.fault('z', 'disconnect', duration_s=2.5)
+    t_lost = time.monotonic()
+
+    def reported(level):
+        status = probe.supply_status('z', t_lost)
+        return status is not None and status.level == level
+
+    assert wait_for(lambda: reported(DiagnosticStatus.ERROR), timeout_s=3.0)
+    assert 'disconnected' in probe.supply_status('z', t_lost).message
+    assert emulators.setpoints()[2] > 4.0  # unplugged, the coil keeps its stale current
+    assert node.popen.poll() is None
+    assert wait_for(lambda: emulators.state()['z']['connected'], timeout_s=4.0)
+    assert wait_for(lambda: emulators.setpoints() == [0.0] * 3, timeout_s=4.0)
+    t_back = time.monotonic()
+    assert wait_for(lambda: reported(DiagnosticStatus.WARN) or reported(DiagnosticStatus.OK),
+                    timeout_s=3.0)
+    after_reconnect = emulators.sets_since(t_lost)['z']  # nothing arrives while unplugged
+    assert after_reconnect and all(c == 0.0 for c in after_reconnect), after_reconnect
+    probe.command_field([1e-3, 1e-3, 1e-3])
+    assert wait_for(lambda: close_to(emulators.setpoints(),
+                                     expected_currents([1e-3] * 3), 0.0051))
+
+
+def test_scpi_error_queue_is_reported_and_setpoint_reasserted(coil_rig, probe):
+    emulators, node = coil_rig('scpi', 115200)
+    ready(emulators, probe)
+    field = [2e-3, 2e-3, 2e-3]
+    probe.command_field(field)
+    assert wait_for(lambda: close_to(emulators.setpoints(), expected_currents(field), 1e-4))
+    emulators.fault('x', 'error', count=1, code=-300, text='Device-specific error')
+    t0 = time.monotonic()
+    assert wait_for(lambda: (probe.supply_status('x', t0) is not None
+                             and '-300' in probe.supply_status('x', t0).message))
+    assert probe.supply_status('x', t0).level == DiagnosticStatus.WARN
+    assert 'setpoint re-sent' in node.output()
+
+
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
+def test_signal_sets_outputs_to_zero_and_off_before_exit(coil_rig, probe, sig):
+    emulators, node = coil_rig('dxkdp', 9600)
+    ready(emulators, probe)
+    probe.command_field([5e-3, -5e-3, 5e-3])
+    assert wait_for(lambda: abs(emulators.setpoints()[1]) > 4.0)
+    assert node.stop(sig) == 0
+    assert emulators.setpoints() == [0.0] * 3
+    assert not any(emulators.outputs())
+    assert 'outputs zero and off' in node.output()
+
+
+def test_missing_port_at_start_keeps_the_node_up_until_it_appears(coil_rig, probe, tmp_path):
+    emulators, node = coil_rig('dxkdp', 115200)
+    emulators.fault('x', 'disconnect', duration_s=3.0)  # x is absent while the node starts
+    t0 = time.monotonic()
+    assert probe.wait_for_subscriber()
+    assert wait_for(lambda: (probe.supply_status('x', t0) is not None
+                             and probe.supply_status('x', t0).level == DiagnosticStatus.ERROR))
+    assert not any(emulators.outputs()[1:])  # not energised while a supply is missing
+    assert wait_for(lambda: all(emulators.outputs()), timeout_s=8.0)

@@ -14,7 +14,7 @@ setup(
     zip_safe=True,
     maintainer='Tentacle rig software team',
     maintainer_email='rig-software@example.com',
-    description='Helmholtz coil driver: field<->current maths, supply wire dialects, coils node.',
+    description='Helmholtz coil driver: field-to-current maths, supply wire dialects, coils node.',
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

@@ -1,1 +1,1 @@
-"""Helmholtz coil driver: field<->current maths, supply wire dialects, coils node."""
+"""Helmholtz coil driver: field-to-current maths, supply wire dialects, coils node."""

@@ -173,8 +173,10 @@ def test_serial_loss_shows_in_diagnostics_reconnects_and_drives_zero(coil_rig, p
     emulators, node = coil_rig('dxkdp', 115200)
     ready(emulators, probe)
     probe.command_field([3e-3, 3e-3, 3e-3])
-    assert wait_for(lambda: emulators.setpoints()[2] > 4.0)
+    assert wait_for(lambda: close_to(emulators.setpoints(), expected_currents([3e-3] * 3),
+                                     0.0051))  # the ramp is over
     emulators.fault('z', 'disconnect', duration_s=2.5)
+    assert wait_for(lambda: not emulators.state()['z']['connected'])
     t_lost = time.monotonic()
 
     def reported(level):

@@ -29,6 +29,7 @@ from tentacle_coils.transport import SerialLine
 log = logging.getLogger('tentacle_coils')
 
 STEP_DT_CAP_S = 0.05  # longest interval one slew step may cover (s)
+CHECK_PERIOD_S = 1.0  # how often to ask a supply for errors it would not report itself (s)
 
 
 class Channel:
@@ -63,8 +64,10 @@ class Channel:
         self.last_error = ''
         self.updates = 0
         self.faults = 0
-        self._t_step = time.monotonic()
+        self._t_step = time.monotonic()  # start of the current slew step (s)
+        self._t_last_set = 0.0
         self._next_readback = 0.0
+        self._next_check = 0.0
 
     # -- called from other threads ----------------------------------------------------------
     def request(self, target_a=None, output=None):
@@ -157,17 +160,25 @@ class Channel:
             self.connected = True
             self.sent_a = 0.0  # connect() drove the device to zero
             self.output_on = None
-            self._next_readback = 0.0
+            self._next_readback = self._next_check = 0.0
         log.info('supply %s connected on %s: %s', self.name, self.supply.line.path, identity)
         return True
 
     def _serve(self):
-        """Do what is due: output change, one slew step, a readback."""
+        """Do what is due: output change, one slew step, a readback.
+
+        A readback goes right after a set when one is due, so in a command stream it uses
+        the line while it would idle until the next command. It runs on its own only when no
+        set has gone out for a readback period: a command never waits behind a readback
+        while commands keep coming.
+        """
         with self._cond:
             while not self._stop.is_set():
-                wait = self._next_readback - time.monotonic()
-                if (self.target_a != self.sent_a or self.output_on != self.output_wanted
-                        or wait <= 0):
+                if self.target_a != self.sent_a or self.output_on != self.output_wanted:
+                    break
+                wake = max(self._next_readback, self._t_last_set + self.readback_period_s)
+                wait = wake - time.monotonic()
+                if wait <= 0:
                     break
                 self._cond.wait(wait)
             target, wanted = self.target_a, self.output_wanted
@@ -184,19 +195,22 @@ class Channel:
             setpoint = target if abs(delta) <= max_step else self.sent_a + math.copysign(
                 max_step, delta)
             self.supply.set_current(setpoint)
-            self._t_step = now
+            self._t_step = self._t_last_set = now
             with self._cond:
                 self.sent_a = setpoint
                 self.updates += 1
-        if time.monotonic() >= self._next_readback:
-            self._next_readback = time.monotonic() + self.readback_period_s
+        now = time.monotonic()
+        if now >= self._next_readback:
+            self._next_readback = now + self.readback_period_s
             measured = self.supply.read_current()
-            problems = self.supply.check(self.sent_a)
             with self._cond:
                 self.measured_a = measured
-                if problems:
-                    self.last_error = '; '.join(problems)
+        if now >= self._next_check:
+            self._next_check = now + CHECK_PERIOD_S
+            problems = self.supply.check(self.sent_a)
             if problems:
+                with self._cond:
+                    self.last_error = '; '.join(problems)
                 log.warning('supply %s reports %s; setpoint re-sent', self.name,
                             self.last_error)
                 self.supply.set_current(self.sent_a)

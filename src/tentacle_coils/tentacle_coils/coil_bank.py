@@ -29,6 +29,7 @@ from tentacle_coils.transport import SerialLine
 log = logging.getLogger('tentacle_coils')
 
 STEP_DT_CAP_S = 0.05  # longest interval one slew step may cover (s)
+READBACK_MAX_DEFER_S = 0.5  # longest a readback waits for a busy command stream (s)
 CHECK_PERIOD_S = 1.0  # how often to ask a supply for errors it would not report itself (s)
 
 
@@ -167,10 +168,11 @@ class Channel:
     def _serve(self):
         """Do what is due: output change, one slew step, a readback.
 
-        A readback goes right after a set when one is due, so in a command stream it uses
-        the line while it would idle until the next command. It runs on its own only when no
-        set has gone out for a readback period: a command never waits behind a readback
-        while commands keep coming.
+        A readback goes right after a set when one is due and no newer command is waiting,
+        so in a command stream it uses the line while it would idle until the next command;
+        when commands keep the line busy it is deferred, for at most READBACK_MAX_DEFER_S.
+        It runs on its own only when no set has gone out for a readback period: a command
+        never waits behind a readback while commands keep coming.
         """
         with self._cond:
             while not self._stop.is_set():
@@ -200,7 +202,9 @@ class Channel:
                 self.sent_a = setpoint
                 self.updates += 1
         now = time.monotonic()
-        if now >= self._next_readback:
+        with self._cond:
+            busy = self.target_a != self.sent_a
+        if now >= self._next_readback + (READBACK_MAX_DEFER_S if busy else 0.0):
             self._next_readback = now + self.readback_period_s
             measured = self.supply.read_current()
             with self._cond:

@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Benchmark: command-to-wire latency and sustained field update rate of coils_node.
+"""
+Benchmark: command-to-wire latency and sustained field update rate of coils_node.
 
 The rig is as deployed: coils_node in its own process, three emulated supplies on ptys that
 count a request as arrived only when its bytes would have crossed the line at the baud rate
@@ -36,9 +37,9 @@ os.environ['PYTHONPATH'] = os.pathsep.join(SOURCES + [os.environ.get('PYTHONPATH
 os.environ.setdefault('ROS_DOMAIN_ID', str(230 + os.getpid() % 2))
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
+from geometry_msgs.msg import Vector3Stamped  # noqa: E402
 import numpy as np  # noqa: E402
 import rclpy  # noqa: E402
-from geometry_msgs.msg import Vector3Stamped  # noqa: E402
 
 from tentacle_coils.coil_bank import build_bank  # noqa: E402
 from tentacle_coils.field_map import ActuationMap  # noqa: E402
@@ -153,7 +154,8 @@ def measure_latency(rig, commander, count, rate_hz):
 
 
 def measure_rate(rig, commander, seconds, publish_hz):
-    """Return (set commands per second per axis (3,), mean set request bytes, offered /s).
+    """
+    Return (set commands per second per axis (3,), mean set request bytes, offered /s).
 
     :param rig: has .emulators (a CoilRig, or BankOnly)
     :param commander: has .send(currents_a) (a Commander over DDS, or BankOnly)
@@ -241,8 +243,8 @@ def print_table(results):
               f'{r["latency_p99_ms"] - r["set_wire_time_ms"]:9.2f}'
               + (f'  ({r["latency_missing"]} not found)' if r['latency_missing'] else ''))
     print('\nsustained field update rate (commands offered faster than the line carries)')
-    print(f'{"dialect":>8} {"baud":>7} {"readback":>9} {"offered":>8} {"x/s":>7} {"y/s":>7} {"z/s":>7} '
-          f'{"field/s":>8} {"ceiling":>8} {"of ceil":>8} {"known drv":>10}')
+    print(f'{"dialect":>8} {"baud":>7} {"readback":>9} {"offered":>8} {"x/s":>7} {"y/s":>7} '
+          f'{"z/s":>7} {"field/s":>8} {"ceiling":>8} {"of ceil":>8} {"known drv":>10}')
     for r in results:
         for key in sorted(k for k in r if k.startswith('rate_')):
             s = r[key]
@@ -258,7 +260,7 @@ def print_table(results):
 
 def main():
     """Run both dialects and print the tables."""
-    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser = argparse.ArgumentParser(description=__doc__.strip().split('\n')[0])
     parser.add_argument('--quick', action='store_true', help='fewer samples (smoke run)')
     parser.add_argument('--out', default=str(ROOT / 'bench' / 'out' / 'coils_rate.json'))
     opts = parser.parse_args()

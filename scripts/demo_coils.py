@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Demo: three emulated DXKDP supplies, coils_node, and a rotating field.
+"""
+Demo: three emulated DXKDP supplies, coils_node, and a rotating field.
 
 Brings up the rig exactly as a lab would run it (coils_node in its own process with
 config/coils.yaml, the supplies on serial lines, 9600 baud), commands a 10 mT field
@@ -22,9 +23,9 @@ os.environ['PYTHONPATH'] = os.pathsep.join(SOURCES + [os.environ.get('PYTHONPATH
 os.environ.setdefault('ROS_DOMAIN_ID', str(200 + os.getpid() % 30))
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
+from geometry_msgs.msg import Vector3Stamped  # noqa: E402
 import numpy as np  # noqa: E402
 import rclpy  # noqa: E402
-from geometry_msgs.msg import Vector3Stamped  # noqa: E402
 
 from tentacle_coils.field_map import ActuationMap  # noqa: E402
 from tentacle_coils.params import REFERENCE_MATRIX_T_PER_A  # noqa: E402
@@ -39,7 +40,7 @@ def field_at(t, amplitude_t, period_s, z_t):
 
 def main():
     """Run the demo; return the process exit code."""
-    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser = argparse.ArgumentParser(description=__doc__.strip().split('\n')[0])
     parser.add_argument('--seconds', type=float, default=6.0, help='how long to rotate')
     parser.add_argument('--rate', type=float, default=20.0, help='field commands per second')
     parser.add_argument('--amplitude-mt', type=float, default=10.0)
@@ -110,7 +111,8 @@ def main():
         state = rig.emulators.state()
         rig.emulators.stop()
         print(f'\ndemo: coils_node exited with {code}; supplies now: ' + ', '.join(
-            f"{n} {state[n]['setpoint_a']:.2f} A, output {'on' if state[n]['output_on'] else 'off'}"
+            f"{n} {state[n]['setpoint_a']:.2f} A, output "
+            f"{'on' if state[n]['output_on'] else 'off'}"
             for n in 'xyz'))
 
 

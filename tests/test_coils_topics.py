@@ -1,4 +1,5 @@
-"""The coils node as deployed: its own process, emulated supplies on ptys, DDS topics.
+"""
+The coils node as deployed: its own process, emulated supplies on ptys, DDS topics.
 
 Expected currents come from solving B = A I independently of the node's code (numpy), and
 what reached the wire is read from the emulator's received-bytes log.
@@ -10,8 +11,7 @@ import time
 from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 import pytest
-
-from conftest import wait_for
+from rig_support import wait_for
 
 pytestmark = pytest.mark.ros
 
@@ -189,7 +189,6 @@ def test_serial_loss_shows_in_diagnostics_reconnects_and_drives_zero(coil_rig, p
     assert node.popen.poll() is None
     assert wait_for(lambda: emulators.state()['z']['connected'], timeout_s=4.0)
     assert wait_for(lambda: emulators.setpoints() == [0.0] * 3, timeout_s=4.0)
-    t_back = time.monotonic()
     assert wait_for(lambda: reported(DiagnosticStatus.WARN) or reported(DiagnosticStatus.OK),
                     timeout_s=3.0)
     after_reconnect = emulators.sets_since(t_lost)['z']  # nothing arrives while unplugged

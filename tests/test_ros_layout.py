@@ -1,4 +1,5 @@
-"""The lab-PC route: colcon builds ros_ws, executables land where `ros2 run` looks for them.
+"""
+The lab-PC route: colcon builds ros_ws, executables land where `ros2 run` looks for them.
 
 There is no ros2 command line on PyPI, so `ros2 run` is exercised through what it relies on:
 the install layout and the ament index, via scripts/ros2_run in a freshly sourced shell.
@@ -13,8 +14,7 @@ import sys
 import time
 
 import pytest
-
-from conftest import ROOT
+from rig_support import ROOT
 
 pytestmark = pytest.mark.ros
 

@@ -1,4 +1,5 @@
-"""Fit the actuation matrix A and field offset b0 (B = A I + b0) from measurements.
+"""
+Fit the actuation matrix A and field offset b0 (B = A I + b0) from measurements.
 
 Input: a CSV with a header row and one row per measurement, SI units:
 ``current_x_a,current_y_a,current_z_a,field_x_t,field_y_t,field_z_t`` (a gaussmeter at the
@@ -35,7 +36,8 @@ class Fit:
 
 
 def read_measurements(path):
-    """Return (currents (n, 3) in A, fields (n, 3) in T) from a CSV.
+    """
+    Return (currents (n, 3) in A, fields (n, 3) in T) from a CSV.
 
     :raises ConfigError: missing columns, a non-numeric or non-finite value (file and line
         named), or no rows
@@ -66,7 +68,8 @@ def read_measurements(path):
 
 
 def fit(currents_a, fields_t, with_offset=True):
-    """Fit B = A I (+ b0) by least squares.
+    """
+    Fit B = A I (+ b0) by least squares.
 
     :param currents_a: (n, 3) currents, ampere
     :param fields_t: (n, 3) measured fields, tesla
@@ -96,7 +99,8 @@ def _flow(values, indent):
 
 
 def write_into_config(path, result):
-    """Replace actuation_matrix and field_offset in a coils params file, keeping comments.
+    """
+    Replace actuation_matrix and field_offset in a coils params file, keeping comments.
 
     :raises ConfigError: the file lacks either key
     """
@@ -131,7 +135,8 @@ def report(result):
 
 def main(args=None):
     """Fit a calibration CSV, print the fit, optionally write it into a params file."""
-    parser = argparse.ArgumentParser(prog='calibrate_coils', description=__doc__.split('\n')[0])
+    parser = argparse.ArgumentParser(prog='calibrate_coils',
+                                     description=__doc__.strip().split('\n')[0])
     parser.add_argument('csv', help='measurements: ' + ','.join(COLUMNS))
     parser.add_argument('--write', metavar='PARAMS_YAML',
                         help='put the fit into this coils params file (e.g. config/coils.yaml)')

@@ -1,4 +1,5 @@
-"""Three supplies driven as one coil bank: limits, slew, watchdog, faults and safe stop.
+"""
+Three supplies driven as one coil bank: limits, slew, watchdog, faults and safe stop.
 
 Each axis is a Channel: its own serial line and one worker thread, so the three supplies are
 commanded in parallel and each waits only for its own ACK. Commands are latest-wins: a
@@ -38,7 +39,8 @@ class Channel:
 
     def __init__(self, name, supply, *, slew_rate_a_per_s, readback_period_s,
                  backoff_s=(0.1, 2.0), on_fault=None):
-        """Bind an axis to its supply.
+        """
+        Bind an axis to its supply.
 
         :param name: axis label, 'x', 'y' or 'z'
         :param supply: a Supply whose line is not yet open
@@ -166,7 +168,8 @@ class Channel:
         return True
 
     def _serve(self):
-        """Do what is due: output change, one slew step, a readback.
+        """
+        Do what is due: output change, one slew step, a readback.
 
         A readback goes right after a set when one is due and no newer command is waiting,
         so in a command stream it uses the line while it would idle until the next command;
@@ -224,7 +227,8 @@ class CoilBank:
     """Three channels (x, y, z) with command validation, watchdog and safe stop."""
 
     def __init__(self, channels, *, max_current_a, watchdog_s, supervise_period_s=0.02):
-        """Take ownership of the channels.
+        """
+        Take ownership of the channels.
 
         :param channels: three Channels in x, y, z order
         :param max_current_a: largest current magnitude any command may ask for (A)
@@ -295,7 +299,8 @@ class CoilBank:
         self._supervisor.start()
 
     def command(self, currents_a):
-        """Set new target currents (3,) in A.
+        """
+        Set new target currents (3,) in A.
 
         :raises CommandRejected: not finite, over max_current, estop, disabled or faulted
         """
@@ -318,7 +323,8 @@ class CoilBank:
                 channel.request(target_a=current_a)
 
     def enable(self, on):
-        """Energise (outputs on, zero current) or de-energise (ramp to zero, outputs off).
+        """
+        Energise (outputs on, zero current) or de-energise (ramp to zero, outputs off).
 
         :return: (success, message)
         """
@@ -341,7 +347,8 @@ class CoilBank:
             return True, 'outputs on at zero current'
 
     def set_estop(self, active):
-        """Engage or release the emergency stop.
+        """
+        Engage or release the emergency stop.
 
         Engaging ramps to zero and switches outputs off. Releasing restores the outputs that
         were on before, at zero current: nothing moves until a new command.
@@ -396,7 +403,8 @@ class CoilBank:
                     self._fault = ''
 
     def shutdown(self, reason='shutdown', timeout_s=None):
-        """Ramp to zero, switch outputs off and stop every worker; blocks until done.
+        """
+        Ramp to zero, switch outputs off and stop every worker; blocks until done.
 
         :param timeout_s: how long to wait for the ramp and the outputs (s); default: the
             ramp time at the slew limit plus one second
@@ -428,7 +436,8 @@ class CoilBank:
 def build_bank(ports, *, dialect, baud, addresses=(1, 1, 1), polarity_inverted=(False,) * 3,
                polarity_mode='signed', max_current_a, slew_rate_a_per_s, watchdog_s,
                readback_period_s=0.1, retries=3, reply_timeout_s=0.1, voltage_limit_v=30.0):
-    """Return a CoilBank of three supplies on the given ports (x, y, z), not yet started.
+    """
+    Return a CoilBank of three supplies on the given ports (x, y, z), not yet started.
 
     :raises ConfigError: wrong counts, an unknown dialect or polarity mode
     """

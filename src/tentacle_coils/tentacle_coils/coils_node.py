@@ -1,4 +1,5 @@
-"""coils_node: field commands in, three supplies driven, measured currents and field out.
+"""
+coils_node: field commands in, three supplies driven, measured currents and field out.
 
 Topics and services (DESIGN.md): /coils/field_cmd (in), /coils/currents, /coils/field,
 /diagnostics (out), /coils/enable (service), /estop (in, transient local). The logic lives in
@@ -13,10 +14,10 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Vector3Stamped
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Bool
 from std_srvs.srv import SetBool

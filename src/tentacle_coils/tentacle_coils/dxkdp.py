@@ -1,4 +1,5 @@
-"""Wire codec of the Dexing DXKDP bipolar supplies (binary frames, ACK/NAK).
+"""
+Wire codec of the Dexing DXKDP bipolar supplies (binary frames, ACK/NAK).
 
 Taken from public driver code for these units, not from a manual: confirm on your own units.
 
@@ -85,7 +86,8 @@ def checksum(address, code, data):
 
 
 def encode_frame(address, code, data=b''):
-    """Return the bytes of one frame.
+    """
+    Return the bytes of one frame.
 
     :param address: bus address, 0..255
     :param code: command code, 0..255
@@ -111,7 +113,8 @@ def frame_length(buf):
 
 
 def decode_frame(buf):
-    """Decode one whole frame.
+    """
+    Decode one whole frame.
 
     :param buf: exactly one frame's bytes
     :return: the Frame
@@ -141,7 +144,8 @@ def _count(value, per_count, what):
 
 
 def current_count(current_a, signed):
-    """Return the 16-bit count for a current setpoint.
+    """
+    Return the 16-bit count for a current setpoint.
 
     :param current_a: setpoint, ampere; negative only when ``signed``
     :param signed: second-generation units: a negative current is the two's complement count
@@ -211,7 +215,8 @@ def read_state(address):
 
 
 def parse_ack(byte):
-    """Return True for ACK, False for NAK.
+    """
+    Return True for ACK, False for NAK.
 
     :raises FrameError: any other byte
     """
@@ -223,7 +228,8 @@ def parse_ack(byte):
 
 
 def parse_reading(frame, signed=False):
-    """Return the Reading carried by a reply to READ_OUTPUT or READ_STATE.
+    """
+    Return the Reading carried by a reply to READ_OUTPUT or READ_STATE.
 
     :param frame: a decoded reply Frame
     :param signed: decode the current as a two's complement count
@@ -259,7 +265,8 @@ def encode_reading(address, code, reading, signed=False):
 
 
 def decode_request(frame):
-    """Return the request's values as a dict with SI names (used by emulators and logs).
+    """
+    Return the request's values as a dict with SI names (used by emulators and logs).
 
     :raises FrameError: an unknown code or a data length that does not fit its layout
     """

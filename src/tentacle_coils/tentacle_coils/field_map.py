@@ -1,4 +1,5 @@
-"""Field <-> current maths of a 3-axis coil: B = A @ I + b0, and the limits on a command.
+"""
+Field <-> current maths of a 3-axis coil: B = A @ I + b0, and the limits on a command.
 
 A (3x3, tesla per ampere) is the calibrated actuation matrix, cross-coupling allowed; b0
 (tesla) the field with zero current (ambient field, residual magnetisation). Both come from
@@ -19,7 +20,8 @@ class ActuationMap:
     """The affine map between coil currents (A) and the uniform field (T)."""
 
     def __init__(self, matrix_t_per_a, offset_t=(0.0, 0.0, 0.0)):
-        """Check and store the calibration.
+        """
+        Check and store the calibration.
 
         :param matrix_t_per_a: 9 floats row-major or a (3, 3) array, tesla per ampere
         :param offset_t: (3,) field at zero current, tesla
@@ -43,11 +45,11 @@ class ActuationMap:
         self._inverse = np.linalg.inv(matrix)
 
     def field(self, currents_a):
-        """Return the field (3,) in tesla made by currents (3,) in ampere."""
+        """Return the field in tesla, shape (3,), that currents in ampere, shape (3,), make."""
         return self.matrix @ np.asarray(currents_a, dtype=float) + self.offset
 
     def currents(self, field_t):
-        """Return the currents (3,) in ampere that make field (3,) in tesla."""
+        """Return the currents in ampere, shape (3,), that make a field in tesla, shape (3,)."""
         return self._inverse @ (np.asarray(field_t, dtype=float) - self.offset)
 
 
@@ -61,7 +63,8 @@ class Limits:
 
 
 def plan_currents(field_t, actuation, limits):
-    """Return (currents (3,) in A, note) for a field command, or raise.
+    """
+    Return (currents (3,) in A, note) for a field command, or raise.
 
     Validation order: finite, field limit (per axis), current limit (per axis). With
     ``limits.clamp`` an over-limit command is scaled down as a whole, so the field keeps its

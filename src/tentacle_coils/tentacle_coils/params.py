@@ -1,4 +1,5 @@
-"""The coils node's parameters, in one table: name, default, range, unit, description.
+"""
+The coils node's parameters, in one table: name, default, range, unit, description.
 
 Plain data (no rclpy): the node declares every row with a descriptor, ``coils_node --help``
 prints the table, and tests read it. Names are those of DESIGN.md; units are in the
@@ -32,7 +33,7 @@ COILS_PARAMS = (
     Param('polarity_inverted', [False, False, False],
           'per supply: wired reversed, so the sign is flipped at the wire'),
     Param('polarity_mode', 'signed',
-          'dxkdp: signed (second generation, two\'s complement current) or command '
+          "dxkdp: signed (second generation, two's complement current) or command "
           '(first generation, polarity by command 0x24)'),
     Param('actuation_matrix', list(REFERENCE_MATRIX_T_PER_A),
           'B = A @ I + field_offset: 3x3 row-major, tesla per ampere'),
@@ -50,7 +51,7 @@ COILS_PARAMS = (
           0.1, 200.0),
     Param('retries', 3, 'attempts after the first before a command counts as failed', 0, 20),
     Param('reply_timeout_s', 0.1,
-          'wait for a reply beyond the bytes\' own wire time, second', 0.001, 5.0),
+          "wait for a reply beyond the bytes' own wire time, second", 0.001, 5.0),
     Param('voltage_limit', 30.0, 'compliance voltage programmed into dxkdp supplies, volt',
           0.0, 650.0),
     Param('auto_enable', True,

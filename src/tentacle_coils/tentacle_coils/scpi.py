@@ -1,4 +1,5 @@
-"""Wire codec of a generic SCPI bipolar supply (one per axis, text lines, 8N1).
+"""
+Wire codec of a generic SCPI bipolar supply (one per axis, text lines, 8N1).
 
 Lines end in LF (CR tolerated on input). Set commands get no reply; queries get one line.
 Commands are declared as data below; the driver (supply.py) and the emulator
@@ -51,7 +52,8 @@ def query_output():
 
 
 def set_current(current_a):
-    """Return ``CURR <amps>`` with 0.1 mA resolution.
+    """
+    Return ``CURR <amps>`` with 0.1 mA resolution.
 
     :raises ValueError: a current that is not finite
     """
@@ -93,7 +95,8 @@ def _text(line):
 
 
 def parse_float(line):
-    """Return the number in a reply line.
+    """
+    Return the number in a reply line.
 
     :raises FrameError: not one finite number
     """
@@ -108,7 +111,8 @@ def parse_float(line):
 
 
 def parse_bool(line):
-    """Return the state in an ``OUTP?`` reply (``1`` or ``0``).
+    """
+    Return the state in an ``OUTP?`` reply (``1`` or ``0``).
 
     :raises FrameError: anything else
     """
@@ -119,7 +123,8 @@ def parse_bool(line):
 
 
 def parse_error(line):
-    """Return (code, text) of a ``SYST:ERR?`` reply; code 0 means no error.
+    """
+    Return (code, text) of a ``SYST:ERR?`` reply; code 0 means no error.
 
     :raises FrameError: not of the form ``<code>,"<text>"``
     """
@@ -131,7 +136,8 @@ def parse_error(line):
 
 
 def parse_identity(line):
-    """Return (maker, model, serial, firmware) of an ``*IDN?`` reply.
+    """
+    Return (maker, model, serial, firmware) of an ``*IDN?`` reply.
 
     :raises FrameError: not four comma-separated fields
     """
@@ -152,7 +158,8 @@ def format_value(value):
 
 
 def parse_command(line):
-    """Split a received command line into (header, argument or None, is_query).
+    """
+    Split a received command line into (header, argument or None, is_query).
 
     Headers are case-insensitive, as SCPI allows.
 

@@ -1,4 +1,5 @@
-"""One bipolar supply's commands over a SerialLine, in the configured wire dialect.
+"""
+One bipolar supply's commands over a SerialLine, in the configured wire dialect.
 
 A supply object is driven by exactly one thread (its channel in coil_bank.py). Every
 exchange has a deadline and a bounded number of attempts; after the last it raises
@@ -22,7 +23,8 @@ class Supply:
 
     def __init__(self, line, *, address=1, polarity_inverted=False, retries=3,
                  reply_timeout_s=0.1, voltage_limit_v=30.0):
-        """Bind to a line.
+        """
+        Bind to a line.
 
         :param line: a SerialLine (opened by the caller)
         :param address: bus address (dxkdp)
@@ -80,7 +82,8 @@ class Supply:
         raise NotImplementedError
 
     def check(self, setpoint_a):
-        """Return the problems the device reports with the setpoint it should hold (A).
+        """
+        Return the problems the device reports with the setpoint it should hold (A).
 
         An ACK already confirms a dxkdp set, so the base has nothing to check.
         """
@@ -88,7 +91,8 @@ class Supply:
 
 
 class DxkdpSupply(Supply):
-    """A Dexing DXKDP unit: binary frames, each set command answered by ACK or NAK.
+    """
+    A Dexing DXKDP unit: binary frames, each set command answered by ACK or NAK.
 
     ``polarity_mode`` is ``signed`` (second generation: negative current as two's complement)
     or ``command`` (first generation: polarity set by command 0x24, magnitude by 0x22).
@@ -137,7 +141,8 @@ class DxkdpSupply(Supply):
         self._positive = None
         self._exchange(dxkdp.set_voltage(self.address, self.voltage_limit_v))
         self.set_current(0.0)
-        self.identity = f'dxkdp address {self.address} (output {"on" if state.output_on else "off"})'
+        output = 'on' if state.output_on else 'off'
+        self.identity = f'dxkdp address {self.address} (output {output})'
         return self.identity
 
     def set_output(self, on):
@@ -234,7 +239,8 @@ DIALECTS = {'dxkdp': DxkdpSupply, 'scpi': ScpiSupply}
 
 
 def make_supply(dialect, line, **kwargs):
-    """Return a Supply of the named dialect bound to line.
+    """
+    Return a Supply of the named dialect bound to line.
 
     :raises ConfigError: an unknown dialect
     """

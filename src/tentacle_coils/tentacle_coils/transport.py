@@ -1,4 +1,5 @@
-"""A serial line opened by path, with deadline-bounded reads and line-rate paced writes.
+"""
+A serial line opened by path, with deadline-bounded reads and line-rate paced writes.
 
 The same class serves a USB-RS232 adapter and a pseudo-terminal; only the path differs.
 """
@@ -15,7 +16,8 @@ BITS_PER_BYTE = 10  # 8N1: start, 8 data, stop
 
 
 class SerialLine:
-    """One serial port.
+    """
+    One serial port.
 
     Reads take an absolute deadline (``time.monotonic()`` seconds) and raise ReplyTimeout
     past it. Writes are paced so that the bytes of one write have left the line (at ``baud``)
@@ -40,8 +42,9 @@ class SerialLine:
         """Return True while the port is open."""
         return self._port is not None
 
-    def open(self):
-        """Open the port (8N1, exclusive).
+    def open(self):  # noqa: A003 (the serial-port verb, as in pyserial)
+        """
+        Open the port (8N1, exclusive).
 
         :raises LinkLost: the path does not exist or cannot be opened
         """
@@ -73,7 +76,8 @@ class SerialLine:
         return LinkLost(f'{self.path}: {exc}')
 
     def write(self, data):
-        """Send bytes once the previous write has left the line.
+        """
+        Send bytes once the previous write has left the line.
 
         :raises LinkLost: the port failed
         """
@@ -104,7 +108,8 @@ class SerialLine:
         return True
 
     def read_exact(self, n_bytes, deadline):
-        """Return exactly n_bytes.
+        """
+        Return exactly n_bytes.
 
         :raises ReplyTimeout: fewer arrived by the deadline (the partial bytes are dropped)
         :raises LinkLost: the port failed
@@ -119,7 +124,8 @@ class SerialLine:
         return out
 
     def read_until(self, terminator, deadline, max_bytes=256):
-        """Return the bytes up to and including terminator.
+        """
+        Return the bytes up to and including terminator.
 
         :raises ReplyTimeout: no terminator by the deadline, or more than max_bytes without one
         :raises LinkLost: the port failed
@@ -137,7 +143,8 @@ class SerialLine:
                                    + (f' (got {got[:40]!r})' if got else ''))
 
     def discard_input(self, quiet_s=0.0):
-        """Drop buffered and pending input; with quiet_s, until the line is quiet that long.
+        """
+        Drop buffered and pending input; with quiet_s, until the line is quiet that long.
 
         :raises LinkLost: the port failed
         """

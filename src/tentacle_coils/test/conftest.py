@@ -7,7 +7,7 @@ from tentacle_sim.supply_emulator import EmulatedSupply
 
 @pytest.fixture
 def emulate(tmp_path):
-    """Return a factory: emulate(dialect, names='xyz', **kwargs) -> list of started emulators."""
+    """Return a factory of started emulators, one per axis name, all of one dialect."""
     started = []
 
     def make(dialect, names='xyz', **kwargs):

@@ -4,11 +4,10 @@ import shutil
 
 import numpy as np
 import pytest
-import yaml
-
 from tentacle_coils.calibration import COLUMNS, fit, main, read_measurements
 from tentacle_coils.errors import ConfigError
 from tentacle_coils.field_map import ActuationMap
+import yaml
 
 TRUE_A = np.array([[0.53e-3, 0.02e-3, -0.01e-3], [0.03e-3, 1.07e-3, 0.0],
                    [-0.02e-3, 0.01e-3, 0.65e-3]])

@@ -20,7 +20,7 @@ def wait_for(predicate, timeout_s=3.0):
 
 @pytest.fixture
 def rig(emulate):
-    """Return a factory: rig(dialect, **bank_kwargs) -> (bank, emulators), bank enabled."""
+    """Return a factory of (enabled bank, its emulators) for a dialect and bank options."""
     banks = []
 
     def make(dialect='dxkdp', baud=115200, emulator=None, **kwargs):

@@ -82,7 +82,8 @@ def test_read_output_reply_decodes():
 def test_read_state_reply_decodes_signed_current():
     reading = dxkdp.Reading(voltage_v=5.0, current_a=-2.5, output_on=True)
     raw = dxkdp.encode_reading(1, dxkdp.Code.READ_STATE, reading, signed=True)
-    assert raw.hex(' ') == 'aa 01 28 05 01 f4 01 06 ff ' + f'{(1 + 0x28 + 5 + 1 + 0xF4 + 1 + 6 + 0xFF) & 0xFF:02x}'
+    checksum = (1 + 0x28 + 5 + 1 + 0xF4 + 1 + 6 + 0xFF) & 0xFF
+    assert raw.hex(' ') == f'aa 01 28 05 01 f4 01 06 ff {checksum:02x}'
     back = dxkdp.parse_reading(dxkdp.decode_frame(raw), signed=True)
     assert (back.output_on, back.voltage_v, back.current_a) == (True, 5.0, -2.5)
 

@@ -37,7 +37,7 @@ def test_dxkdp_signed_currents_reach_the_coil_in_both_generations(emulate, mode,
 
 def test_dxkdp_connect_programs_voltage_limit_and_zero(emulate):
     emu, = emulate('dxkdp', names='x', baud=115200)
-    emu.load.set(setpoint_a=3.0)  # a stale setpoint left from an earlier session
+    emu.load.drive(setpoint_a=3.0)  # a stale setpoint left from an earlier session
     connected(emu, 'dxkdp', 115200, voltage_limit_v=24.0).line.close()
     assert emu.state()['voltage_limit_v'] == 24.0 and emu.state()['setpoint_a'] == 0.0
 

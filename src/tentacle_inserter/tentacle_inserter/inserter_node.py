@@ -1,4 +1,5 @@
-"""Drive the linear insertion stage (/inserter/target, /inserter/state): not built yet.
+"""
+Drive the linear insertion stage (/inserter/target, /inserter/state): not built yet.
 
 The executable exists so the package installs and the ament index lists it; a later issue
 fills it. Running it says so and exits non-zero rather than pretending to work.
@@ -11,7 +12,9 @@ import sys
 def main(args=None):
     """Parse the command line (``--help`` works) and refuse to run."""
     parser = argparse.ArgumentParser(
-        prog='inserter_node', description='Drive the linear insertion stage (/inserter/target, /inserter/state). Not implemented yet.')
+        prog='inserter_node',
+        description='Drive the linear insertion stage (/inserter/target, /inserter/state).'
+                    ' Not implemented yet.')
     parser.parse_known_args(args)
     sys.exit('inserter_node: not implemented yet (a later issue builds it)')
 

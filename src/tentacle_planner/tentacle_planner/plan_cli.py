@@ -1,4 +1,5 @@
-"""Plan a magnetisation profile and field schedule (tentacle-plan): not built yet.
+"""
+Plan a magnetisation profile and field schedule (tentacle-plan): not built yet.
 
 The executable exists so the package installs and the ament index lists it; a later issue
 fills it. Running it says so and exits non-zero rather than pretending to work.
@@ -11,7 +12,9 @@ import sys
 def main(args=None):
     """Parse the command line (``--help`` works) and refuse to run."""
     parser = argparse.ArgumentParser(
-        prog='tentacle-plan', description='Plan a magnetisation profile and field schedule (tentacle-plan). Not implemented yet.')
+        prog='tentacle-plan',
+        description='Plan a magnetisation profile and field schedule (tentacle-plan).'
+                    ' Not implemented yet.')
     parser.parse_known_args(args)
     sys.exit('tentacle-plan: not implemented yet (a later issue builds it)')
 

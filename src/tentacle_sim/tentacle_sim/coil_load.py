@@ -1,4 +1,5 @@
-"""An R-L coil driven by a constant-current supply with a compliance voltage.
+"""
+An R-L coil driven by a constant-current supply with a compliance voltage.
 
 The supply applies V = clip(R * I_set, -V_max, V_max) to the coil, so the current relaxes to
 V / R with time constant L / R (exactly, between setpoint changes), and a setpoint beyond
@@ -15,7 +16,8 @@ class CoilLoad:
 
     def __init__(self, resistance_ohm=1.0, inductance_h=0.01, compliance_v=40.0,
                  clock=time.monotonic):
-        """Start at rest: zero current, output off.
+        """
+        Start at rest: zero current, output off.
 
         :param resistance_ohm: coil resistance, > 0
         :param inductance_h: coil inductance, >= 0 (0: the current follows at once)
@@ -50,7 +52,7 @@ class CoilLoad:
                 -(now - self._t) / self.tau_s)
         self._t = now
 
-    def set(self, setpoint_a=None, output_on=None):
+    def drive(self, setpoint_a=None, output_on=None):
         """Change the setpoint (A) and/or the output state from now on."""
         with self._lock:
             self._advance()

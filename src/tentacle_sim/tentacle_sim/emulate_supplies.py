@@ -1,4 +1,5 @@
-"""Run emulated coil supplies on pseudo-terminals, controlled by JSON lines on stdin.
+"""
+Run emulated coil supplies on pseudo-terminals, controlled by JSON lines on stdin.
 
 Start::
 
@@ -26,7 +27,8 @@ from tentacle_sim.supply_emulator import EmulatedSupply
 
 def build_parser():
     """Return the command-line parser."""
-    parser = argparse.ArgumentParser(prog='supply_emulator', description=__doc__.split('\n')[0])
+    parser = argparse.ArgumentParser(prog='supply_emulator',
+                                     description=__doc__.strip().split('\n')[0])
     parser.add_argument('--dialect', choices=('dxkdp', 'scpi'), default='dxkdp')
     parser.add_argument('--baud', type=int, default=9600, help='line rate, bit/s')
     parser.add_argument('--names', nargs='+', default=['x', 'y', 'z'])

@@ -1,4 +1,5 @@
-"""Start the supply_emulator process and talk to it over its stdin/stdout JSON lines.
+"""
+Start the supply_emulator process and talk to it over its stdin/stdout JSON lines.
 
 Used by the demo, the benchmarks and the cross-process tests; see emulate_supplies.py for
 the control requests.
@@ -16,7 +17,8 @@ class EmulatorProcess:
     """Three emulated supplies in their own process, with stable port links."""
 
     def __init__(self, link_dir, dialect='dxkdp', baud=9600, extra_args=(), cwd=None):
-        """Start the process and wait for its ports.
+        """
+        Start the process and wait for its ports.
 
         :param link_dir: directory for the port links coil_x, coil_y, coil_z
         :param extra_args: more supply_emulator options (e.g. ['--delay-s', '0'])
@@ -44,7 +46,7 @@ class EmulatorProcess:
         return self.ask(op='state')
 
     def setpoints(self):
-        """Return the setpoints (A) of x, y, z."""
+        """Return the setpoint of each axis (A), x, y, z."""
         state = self.state()
         return [state[n]['setpoint_a'] for n in 'xyz']
 
@@ -58,11 +60,12 @@ class EmulatorProcess:
         return self.ask(op='log', port=port, since=since)['log']
 
     def sets_since(self, t):
-        """Return {axis: [current_a of every set request received after time t]}."""
+        """Return the currents (A) of the set requests each axis received after time t."""
         return {n: [e['current_a'] for e in self.log(n, t) if 'current_a' in e] for n in 'xyz'}
 
     def fault(self, port, kind, **options):
-        """Arm a fault on one supply.
+        """
+        Arm a fault on one supply.
 
         :raises RuntimeError: the emulator refused it
         """

@@ -1,4 +1,5 @@
-"""Bring up the emulated coil rig: supply emulators plus a coils_node process.
+"""
+Bring up the emulated coil rig: supply emulators plus a coils_node process.
 
 For the demo, the benchmarks and the cross-process tests: the node runs as deployed (its own
 process, a params file), the supplies are emulators on pseudo-terminals.
@@ -10,9 +11,8 @@ import signal
 import subprocess
 import sys
 
-import yaml
-
 from tentacle_sim.emulator_client import EmulatorProcess
+import yaml
 
 
 def write_coils_params(base_yaml, out_path, **overrides):
@@ -55,7 +55,8 @@ class CoilRig:
 
     def __init__(self, workdir, base_params, dialect='dxkdp', baud=9600, emulator_args=(),
                  cwd=None, **params):
-        """Start the emulators, write the node's params, start the node.
+        """
+        Start the emulators, write the node's params, start the node.
 
         :param workdir: directory for port links, params file and logs
         :param base_params: the coils params file to start from (config/coils.yaml)

@@ -1,4 +1,5 @@
-"""A bipolar coil supply behind a pseudo-terminal, answering as the device would.
+"""
+A bipolar coil supply behind a pseudo-terminal, answering as the device would.
 
 Speaks the dxkdp or scpi dialect with the codecs of tentacle_coils, so driver and emulator
 share one definition of the wire. The line is modelled as the driver would see a real one:
@@ -36,7 +37,8 @@ class EmulatedSupply:
     def __init__(self, name, dialect, *, baud=9600, link_path=None, address=1,
                  polarity_mode='signed', delay_s=0.0005, max_current_a=50.0, load=None,
                  log_path=None):
-        """Describe the device; ``start()`` opens the pty.
+        """
+        Describe the device; ``start()`` opens the pty.
 
         :param name: label for logs (e.g. 'x')
         :param dialect: 'dxkdp' or 'scpi'
@@ -125,7 +127,8 @@ class EmulatedSupply:
     # -- faults and state -------------------------------------------------------------------
     def inject(self, kind, count=1, late_s=0.2, duration_s=1.0, code=-222,
                text='Data out of range'):
-        """Arm a fault.
+        """
+        Arm a fault.
 
         :param kind: one of FAULT_KINDS
         :param count: commands affected (no_reply, nak, garble, late) or entries (error)
@@ -300,11 +303,11 @@ class EmulatedSupply:
             if code == dxkdp.Code.POLARITY:
                 if values['current_positive'] != self._positive:
                     self._positive = values['current_positive']
-                    self.load.set(setpoint_a=-self.load.setpoint_a)
+                    self.load.drive(setpoint_a=-self.load.setpoint_a)
             if 'voltage_v' in meaning:
                 self.voltage_limit_v = meaning['voltage_v']
-            self.load.set(setpoint_a=meaning.get('current_a'),
-                          output_on=meaning.get('output_on'))
+            self.load.drive(setpoint_a=meaning.get('current_a'),
+                            output_on=meaning.get('output_on'))
         return meaning, ack
 
     def _scpi(self, raw, apply):
@@ -328,7 +331,7 @@ class EmulatedSupply:
                     self._errors.append(scpi.DATA_OUT_OF_RANGE)
                 return {**meaning, 'error': 'data out of range'}, None
             if apply:
-                self.load.set(setpoint_a=current_a)
+                self.load.drive(setpoint_a=current_a)
             return meaning, None
         if header == 'OUTP':
             on = argument.upper() in ('ON', '1')
@@ -338,7 +341,7 @@ class EmulatedSupply:
                 return {**meaning, 'error': 'bad argument'}, None
             meaning['output_on'] = on
             if apply:
-                self.load.set(output_on=on)
+                self.load.drive(output_on=on)
             return meaning, None
         if header == 'SYST:ERR?':
             with self._lock:

@@ -20,7 +20,7 @@ class FakeClock:
 def test_step_response_is_first_order_with_tau_l_over_r():
     clock = FakeClock()
     coil = CoilLoad(resistance_ohm=2.0, inductance_h=0.02, compliance_v=100.0, clock=clock)
-    coil.set(setpoint_a=5.0, output_on=True)
+    coil.drive(setpoint_a=5.0, output_on=True)
     for t in (0.001, 0.01, 0.05):
         clock.t = t
         assert coil.current_a() == pytest.approx(5.0 * (1 - math.exp(-t / 0.01)), rel=1e-12)
@@ -29,7 +29,7 @@ def test_step_response_is_first_order_with_tau_l_over_r():
 def test_compliance_voltage_limits_the_current():
     clock = FakeClock()
     coil = CoilLoad(resistance_ohm=2.0, inductance_h=0.0, compliance_v=10.0, clock=clock)
-    coil.set(setpoint_a=-8.0, output_on=True)
+    coil.drive(setpoint_a=-8.0, output_on=True)
     assert coil.current_a() == pytest.approx(-5.0)
     assert coil.voltage_v() == pytest.approx(-10.0)
 
@@ -37,10 +37,10 @@ def test_compliance_voltage_limits_the_current():
 def test_output_off_decays_to_zero():
     clock = FakeClock()
     coil = CoilLoad(resistance_ohm=1.0, inductance_h=0.01, compliance_v=50.0, clock=clock)
-    coil.set(setpoint_a=3.0, output_on=True)
+    coil.drive(setpoint_a=3.0, output_on=True)
     clock.t = 1.0
     assert coil.current_a() == pytest.approx(3.0)
-    coil.set(output_on=False)
+    coil.drive(output_on=False)
     clock.t = 1.02
     assert coil.current_a() == pytest.approx(3.0 * math.exp(-2.0))
 

@@ -1,0 +1,46 @@
+"""
+What the cross-process tests share: a private ROS domain, the repository root, waiting.
+
+Every run claims a private ROS_DOMAIN_ID (a lock file per domain, so parallel runs on one
+machine never share one) with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, before rclpy is
+imported. Import it before rclpy (tests/conftest.py does).
+"""
+
+import fcntl
+import os
+import pathlib
+import time
+
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+DOMAIN_RANGE = range(100, 200)
+
+
+def _claim_domain():
+    for domain in [100 + (os.getpid() + k) % 100 for k in range(len(DOMAIN_RANGE))]:
+        handle = open(f'/tmp/tentacle_rig_ros_domain_{domain}.lock', 'w')
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return domain, handle
+        except OSError:
+            handle.close()
+    raise RuntimeError('no free ROS_DOMAIN_ID in 100..199')
+
+
+DOMAIN_ID, _DOMAIN_LOCK = _claim_domain()
+os.environ['ROS_DOMAIN_ID'] = str(DOMAIN_ID)
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+os.environ['PYTHONPATH'] = os.pathsep.join(
+    [str(p) for p in sorted((ROOT / 'src').iterdir()) if (p / 'package.xml').exists()]
+    + [os.environ.get('PYTHONPATH', '')]).rstrip(os.pathsep)
+os.environ['PYTHONUNBUFFERED'] = '1'
+
+
+def wait_for(predicate, timeout_s=5.0, period_s=0.01):
+    """Return True as soon as predicate() is true, False after timeout_s."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(period_s)
+    return False

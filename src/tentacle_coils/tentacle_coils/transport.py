@@ -13,6 +13,7 @@ import serial
 from tentacle_coils.errors import LinkLost, ReplyTimeout
 
 BITS_PER_BYTE = 10  # 8N1: start, 8 data, stop
+WRITE_TIMEOUT_S = 1.0  # a write that cannot go out this long means the line is gone
 
 
 class SerialLine:
@@ -50,8 +51,7 @@ class SerialLine:
         """
         self.close()
         try:
-            self._port = serial.Serial(self.path, self.baud, timeout=0, write_timeout=1.0,
-                                       exclusive=True)
+            self._port = serial.Serial(self.path, self.baud, timeout=0, exclusive=True)
         except (serial.SerialException, OSError, ValueError) as exc:
             raise LinkLost(f'cannot open {self.path}: {exc}') from None
         self._rx.clear()
@@ -81,13 +81,23 @@ class SerialLine:
 
         :raises LinkLost: the port failed
         """
-        port = self._require()
+        fd = self._require().fileno()
         wait = self._tx_free_at - time.monotonic()
         if wait > 0:
             time.sleep(wait)
+        # os.write on the (non-blocking) descriptor: pyserial's write costs several times
+        # more interpreter time per command, which the other supplies' threads wait for.
+        view = memoryview(data)
+        deadline = time.monotonic() + WRITE_TIMEOUT_S
         try:
-            port.write(data)
-        except (serial.SerialException, OSError) as exc:
+            while view:
+                try:
+                    view = view[os.write(fd, view):]
+                except BlockingIOError:
+                    remaining = deadline - time.monotonic()
+                    if remaining <= 0 or not select.select([], [fd], [], remaining)[1]:
+                        raise self._lost(f'write blocked for {WRITE_TIMEOUT_S} s') from None
+        except OSError as exc:
             raise self._lost(exc) from None
         self._tx_free_at = time.monotonic() + self.wire_time_s(len(data))
 

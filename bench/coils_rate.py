@@ -155,7 +155,7 @@ def measure_latency(rig, commander, count, rate_hz):
 
 def measure_rate(rig, commander, seconds, publish_hz):
     """
-    Return (set commands per second per axis (3,), mean set request bytes, offered /s).
+    Return set commands per second and mean set request bytes, each (3,), and offered /s.
 
     :param rig: has .emulators (a CoilRig, or BankOnly)
     :param commander: has .send(currents_a) (a Commander over DDS, or BankOnly)
@@ -175,8 +175,8 @@ def measure_rate(rig, commander, seconds, publish_hz):
         times, _, nbytes = entries[axis]
         inside = (times >= window[0]) & (times <= window[1])
         rates.append(inside.sum() / (window[1] - window[0]))
-        sizes.extend(nbytes[inside])
-    return np.array(rates), float(np.mean(sizes)), k / (t_end - t_start)
+        sizes.append(float(np.mean(nbytes[inside])))
+    return np.array(rates), np.array(sizes), k / (t_end - t_start)
 
 
 def run_dialect(dialect, baud, quick, workdir):
@@ -184,7 +184,7 @@ def run_dialect(dialect, baud, quick, workdir):
     reply_bytes = 1 if dialect == 'dxkdp' else 0  # SCPI set commands get no reply
     params = {'slew_rate': 1.0e5, 'watchdog_s': 10.0, 'max_current': 60.0, 'max_field': 0.05}
     figures = {'dialect': dialect, 'baud': baud}
-    # Offer 25% more commands than the line carries (dxkdp set: 7 bytes; CURR x.xxxx: ~13).
+    # Offer 25% more commands than the line carries (dxkdp set: 7 bytes; CURR x.xxxx: 12-13).
     offered_hz = 1.25 * baud / 10 / ((7 if dialect == 'dxkdp' else 13) + reply_bytes)
     commander = Commander()
     for readback_hz in (10.0, 2.0):
@@ -224,11 +224,17 @@ def run_dialect(dialect, baud, quick, workdir):
 
 
 def rate_figures(rates, request_bytes, offered, baud, reply_bytes):
-    """Return the rate figures beside the line-rate ceiling of one set and its reply."""
-    ceiling = baud / 10 / (request_bytes + reply_bytes)
-    return {'axes_per_s': rates.round(1).tolist(), 'field_updates_per_s': float(rates.min()),
-            'offered_per_s': offered, 'ceiling_per_s': ceiling,
-            'fraction_of_ceiling': float(rates.min() / ceiling)}
+    """
+    Return the rate figures beside the line-rate ceiling of one set and its reply.
+
+    Each axis has its own line; its ceiling depends on its commands' length (a minus sign is
+    one more SCPI byte). The field is updated as fast as its slowest axis.
+    """
+    ceilings = baud / 10 / (request_bytes + reply_bytes)
+    return {'axes_per_s': rates.round(1).tolist(), 'axes_ceiling_per_s':
+            ceilings.round(1).tolist(), 'field_updates_per_s': float(rates.min()),
+            'offered_per_s': offered, 'ceiling_per_s': float(ceilings.min()),
+            'fraction_of_ceiling': float(rates.min() / ceilings.min())}
 
 
 def print_table(results):

@@ -230,6 +230,17 @@ def test_missing_port_at_start_keeps_the_node_up_until_it_appears(coil_rig, prob
     t0 = time.monotonic()
     assert probe.wait_for_subscriber()
     assert wait_for(lambda: (probe.supply_status('x', t0) is not None
-                             and probe.supply_status('x', t0).level == DiagnosticStatus.ERROR))
+                             and probe.supply_status('x', t0).level == DiagnosticStatus.ERROR),
+                    timeout_s=8.0), 'no ERROR diagnostics for the missing supply x'
     assert not any(emulators.outputs()[1:])  # not energised while a supply is missing
-    assert wait_for(lambda: all(emulators.outputs()), timeout_s=8.0)
+    assert wait_for(lambda: all(emulators.outputs()), timeout_s=10.0), (
+        f'outputs {emulators.outputs()} after x came back:\n{node.output()}')
+
+
+def test_killed_node_still_leaves_the_coils_at_zero_and_off(coil_rig, probe):
+    emulators, node = coil_rig('dxkdp', 115200)
+    ready(emulators, probe)
+    probe.command_field([4e-3, 4e-3, 4e-3])
+    assert wait_for(lambda: emulators.setpoints()[0] > 7.0)
+    node.stop(signal.SIGKILL)  # no chance to clean up: the bank process sees its input close
+    assert wait_for(lambda: emulators.setpoints() == [0.0] * 3 and not any(emulators.outputs()))

@@ -279,6 +279,10 @@ class CoilBank:
         """Return the setpoints the supplies hold (3,) in A."""
         return np.array([ch.sent_a for ch in self.channels])
 
+    def snapshots(self):
+        """Return one dict per supply (for diagnostics)."""
+        return [ch.snapshot() for ch in self.channels]
+
     def status(self):
         """Return (level, message) for the bank: 'ok', 'warn' or 'error'."""
         if self._estop:

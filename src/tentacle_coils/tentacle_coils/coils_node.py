@@ -22,7 +22,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Bool
 from std_srvs.srv import SetBool
 
-from tentacle_coils.coil_bank import build_bank
+from tentacle_coils.bank_process import BankClient
 from tentacle_coils.errors import CoilsError, CommandRejected
 from tentacle_coils.field_map import ActuationMap, Limits, plan_currents
 from tentacle_coils.params import COILS_PARAMS, describe
@@ -75,19 +75,22 @@ class CoilsNode(Node):
         self.actuation = ActuationMap(p['actuation_matrix'], p['field_offset'])
         self.limits = Limits(p['max_current'], p['max_field'], p['clamp'])
         self.auto_enable = p['auto_enable']
-        self.bank = build_bank(
-            list(p['ports']), dialect=p['dialect'], baud=p['baud'],
-            addresses=list(p['addresses']), polarity_inverted=list(p['polarity_inverted']),
-            polarity_mode=p['polarity_mode'], max_current_a=p['max_current'],
-            slew_rate_a_per_s=p['slew_rate'], watchdog_s=p['watchdog_s'],
-            readback_period_s=1.0 / p['publish_rate'], retries=p['retries'],
-            reply_timeout_s=p['reply_timeout_s'], voltage_limit_v=p['voltage_limit'])
         self._log_handler = RosLogHandler(self.get_logger())
         logging.getLogger('tentacle_coils').addHandler(self._log_handler)
         logging.getLogger('tentacle_coils').setLevel(logging.INFO)
         self.rejected = 0
         self.last_rejection = ''
         self._last_logged = {}
+        # The bank runs in its own process (bank_process.py): serial timing never waits for
+        # this executor, and the coils go to zero if this process dies.
+        self.bank = BankClient(
+            on_rejected=self._reject,
+            ports=list(p['ports']), dialect=p['dialect'], baud=p['baud'],
+            addresses=list(p['addresses']), polarity_inverted=list(p['polarity_inverted']),
+            polarity_mode=p['polarity_mode'], max_current_a=p['max_current'],
+            slew_rate_a_per_s=p['slew_rate'], watchdog_s=p['watchdog_s'],
+            readback_period_s=1.0 / p['publish_rate'], retries=p['retries'],
+            reply_timeout_s=p['reply_timeout_s'], voltage_limit_v=p['voltage_limit'])
 
         self.currents_pub = self.create_publisher(Vector3Stamped, '/coils/currents', 10)
         self.field_pub = self.create_publisher(Vector3Stamped, '/coils/field', 10)
@@ -99,7 +102,6 @@ class CoilsNode(Node):
         self.create_service(SetBool, '/coils/enable', self.on_enable)
         self.create_timer(1.0 / p['publish_rate'], self.publish_state)
         self.create_timer(1.0, self.publish_diagnostics)
-        self.bank.start()
         if self.auto_enable:
             self._auto_enable_timer = self.create_timer(0.05, self._try_auto_enable)
         self.get_logger().info(
@@ -178,7 +180,7 @@ class CoilsNode(Node):
         bank.values = [KeyValue(key='commands_rejected', value=str(self.rejected)),
                        KeyValue(key='last_rejection', value=self.last_rejection)]
         array.status.append(bank)
-        for snap in (ch.snapshot() for ch in self.bank.channels):
+        for snap in self.bank.snapshots():
             if not snap['connected']:
                 level, message = 'error', f"disconnected: {snap['last_error']}"
             elif snap['last_error']:
@@ -213,10 +215,6 @@ def main(args=None):
         print('usage: coils_node [--ros-args --params-file FILE | -p NAME:=VALUE ...]\n\n'
               + __doc__ + '\nparameters:\n' + describe())
         return
-    # The supply workers wake from serial I/O every few milliseconds while the executor
-    # thread is busy with messages; Python's default 5 ms GIL switch interval would make each
-    # wait for it. 0.2 ms keeps a worker's wake-up well under one byte time at 9600 baud.
-    sys.setswitchinterval(2e-4)
     rclpy.init(args=args)
     node = None
     try:

@@ -21,8 +21,8 @@ class SerialLine:
     One serial port.
 
     Reads take an absolute deadline (``time.monotonic()`` seconds) and raise ReplyTimeout
-    past it. Writes are paced so that the bytes of one write have left the line (at ``baud``)
-    before the next starts: a command that gets no reply then never queues behind stale ones.
+    past it. Writes are paced at ``baud`` with at most one write queued behind the one on the
+    line: commands that get no reply keep the line busy but never queue up stale ones.
     Any I/O failure raises LinkLost and closes the port.
     """
 
@@ -82,7 +82,10 @@ class SerialLine:
         :raises LinkLost: the port failed
         """
         fd = self._require().fileno()
-        wait = self._tx_free_at - time.monotonic()
+        wire_s = self.wire_time_s(len(data))
+        # Go when at most this write's own length is still queued ahead of it: the line never
+        # idles between commands, and a command never waits behind more than one other.
+        wait = self._tx_free_at - wire_s - time.monotonic()
         if wait > 0:
             time.sleep(wait)
         # os.write on the (non-blocking) descriptor: pyserial's write costs several times
@@ -99,7 +102,7 @@ class SerialLine:
                         raise self._lost(f'write blocked for {WRITE_TIMEOUT_S} s') from None
         except OSError as exc:
             raise self._lost(exc) from None
-        self._tx_free_at = time.monotonic() + self.wire_time_s(len(data))
+        self._tx_free_at = max(time.monotonic(), self._tx_free_at) + wire_s
 
     def _fill(self, deadline):
         """Wait until more bytes arrive or the deadline passes; return False on timeout."""

@@ -1,0 +1,81 @@
+"""The bank in its own process, driven through BankClient, against emulated supplies."""
+
+import time
+
+import pytest
+from tentacle_coils.bank_process import BankClient
+from tentacle_coils.errors import CoilsError, CommandRejected
+
+
+def wait_for(predicate, timeout_s=5.0):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.01)
+    return False
+
+
+@pytest.fixture
+def client(emulate):
+    """Return (BankClient, emulators, rejected reasons) with the outputs enabled."""
+    emus = emulate('dxkdp', baud=115200)
+    rejected = []
+    bank = BankClient(on_rejected=rejected.append, ports=[e.port for e in emus],
+                      dialect='dxkdp', baud=115200, max_current_a=10.0,
+                      slew_rate_a_per_s=1000.0, watchdog_s=5.0, readback_period_s=0.05)
+    assert wait_for(bank.connected)
+    assert bank.enable(True) == (True, 'outputs on at zero current')
+    yield bank, emus, rejected
+    bank.shutdown(timeout_s=5.0)
+
+
+def setpoints(emus):
+    return [emu.state()['setpoint_a'] for emu in emus]
+
+
+def test_commands_reach_the_supplies_and_state_comes_back(client):
+    bank, emus, _ = client
+    bank.command([1.0, -2.0, 3.0])
+    assert wait_for(lambda: setpoints(emus) == [1.0, -2.0, 3.0])
+    assert wait_for(lambda: bank.measured_currents() == pytest.approx([1.0, -2.0, 3.0],
+                                                                      abs=0.02))
+    assert [s['axis'] for s in bank.snapshots()] == ['x', 'y', 'z']
+    assert bank.status() == ('ok', 'enabled')
+
+
+def test_refusals_come_back_with_the_reason(client):
+    bank, emus, rejected = client
+    bank.command([11.0, 0.0, 0.0])
+    assert wait_for(lambda: rejected)
+    assert 'exceed max_current 10 A' in rejected[0]
+    bank.set_estop(True)
+    with pytest.raises(CommandRejected, match='estop'):
+        bank.command([1.0, 1.0, 1.0])
+    assert wait_for(lambda: not any(emu.state()['output_on'] for emu in emus))
+
+
+def test_shutdown_confirms_zero_and_off(client):
+    bank, emus, _ = client
+    bank.command([2.0, 2.0, 2.0])
+    assert wait_for(lambda: setpoints(emus) == [2.0, 2.0, 2.0])
+    assert bank.shutdown('test') is True
+    assert bank.popen.returncode == 0
+    assert setpoints(emus) == [0.0] * 3
+    assert not any(emu.state()['output_on'] for emu in emus)
+
+
+def test_a_vanished_node_leaves_the_coils_at_zero_and_off(client):
+    bank, emus, _ = client
+    bank.command([3.0, -3.0, 3.0])
+    assert wait_for(lambda: setpoints(emus) == [3.0, -3.0, 3.0])
+    bank.popen.stdin.close()  # what the bank sees when the node process dies
+    assert wait_for(lambda: setpoints(emus) == [0.0] * 3
+                    and not any(emu.state()['output_on'] for emu in emus))
+    assert bank.popen.wait(5) == 0
+
+
+def test_bad_configuration_is_reported():
+    with pytest.raises(CoilsError, match='ports needs 3 entries'):
+        BankClient(ports=['/dev/null'], dialect='dxkdp', baud=9600, max_current_a=1.0,
+                   slew_rate_a_per_s=1.0, watchdog_s=1.0)

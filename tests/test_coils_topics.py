@@ -226,14 +226,16 @@ def test_signal_sets_outputs_to_zero_and_off_before_exit(coil_rig, probe, sig):
 
 def test_missing_port_at_start_keeps_the_node_up_until_it_appears(coil_rig, probe, tmp_path):
     emulators, node = coil_rig('dxkdp', 115200)
-    emulators.fault('x', 'disconnect', duration_s=3.0)  # x is absent while the node starts
+    # x is absent while the node starts, long enough for a loaded machine's DDS discovery
+    # to see at least one diagnostics message (1 Hz) about it.
+    emulators.fault('x', 'disconnect', duration_s=6.0)
     t0 = time.monotonic()
     assert probe.wait_for_subscriber()
     assert wait_for(lambda: (probe.supply_status('x', t0) is not None
                              and probe.supply_status('x', t0).level == DiagnosticStatus.ERROR),
                     timeout_s=8.0), 'no ERROR diagnostics for the missing supply x'
     assert not any(emulators.outputs()[1:])  # not energised while a supply is missing
-    assert wait_for(lambda: all(emulators.outputs()), timeout_s=10.0), (
+    assert wait_for(lambda: all(emulators.outputs()), timeout_s=12.0), (
         f'outputs {emulators.outputs()} after x came back:\n{node.output()}')
 
 

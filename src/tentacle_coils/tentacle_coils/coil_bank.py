@@ -12,8 +12,9 @@ Safety rules, in one place:
 - Any supply fault (retries exhausted, link lost) drives every axis to zero and refuses
   commands until all supplies are connected again and hold zero; a reconnected supply is
   driven to zero, never back to its stale setpoint.
-- ``shutdown()`` ramps to zero at the slew limit, then switches outputs off. Estop,
-  disable and process exit use it; the watchdog ramps to zero and leaves outputs on.
+- One safe stop (``_begin_stop``): ramp to zero at the slew limit, then outputs off. Estop
+  and disable use it; ``shutdown()`` uses it and waits for the supplies to confirm before
+  it stops the workers. The watchdog ramps to zero and leaves outputs on.
 """
 
 import logging

@@ -1,5 +1,7 @@
 """Emulated supplies on real pseudo-terminals for the driver tests."""
 
+import time
+
 import pytest
 
 from tentacle_sim.supply_emulator import EmulatedSupply
@@ -19,3 +21,19 @@ def emulate(tmp_path):
     yield make
     for emu in started:
         emu.stop()
+
+
+def _wait_for(predicate, timeout_s=3.0):
+    """Return True as soon as predicate() holds, False after timeout_s."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.005)
+    return False
+
+
+@pytest.fixture
+def wait_for():
+    """Return a poller that waits until a predicate holds (3 s by default)."""
+    return _wait_for

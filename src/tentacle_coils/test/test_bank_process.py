@@ -1,23 +1,12 @@
 """The bank in its own process, driven through BankClient, against emulated supplies."""
 
-import time
-
 import pytest
 from tentacle_coils.bank_process import BankClient
 from tentacle_coils.errors import CoilsError, CommandRejected
 
 
-def wait_for(predicate, timeout_s=5.0):
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.01)
-    return False
-
-
 @pytest.fixture
-def client(emulate):
+def client(emulate, wait_for):
     """Return (BankClient, emulators, rejected reasons) with the outputs enabled."""
     emus = emulate('dxkdp', baud=115200)
     rejected = []
@@ -34,7 +23,7 @@ def setpoints(emus):
     return [emu.state()['setpoint_a'] for emu in emus]
 
 
-def test_commands_reach_the_supplies_and_state_comes_back(client):
+def test_commands_reach_the_supplies_and_state_comes_back(client, wait_for):
     bank, emus, _ = client
     bank.command([1.0, -2.0, 3.0])
     assert wait_for(lambda: setpoints(emus) == [1.0, -2.0, 3.0])
@@ -44,7 +33,7 @@ def test_commands_reach_the_supplies_and_state_comes_back(client):
     assert bank.status() == ('ok', 'enabled')
 
 
-def test_refusals_come_back_with_the_reason(client):
+def test_refusals_come_back_with_the_reason(client, wait_for):
     bank, emus, rejected = client
     bank.command([11.0, 0.0, 0.0])
     assert wait_for(lambda: rejected)
@@ -55,7 +44,7 @@ def test_refusals_come_back_with_the_reason(client):
     assert wait_for(lambda: not any(emu.state()['output_on'] for emu in emus))
 
 
-def test_shutdown_confirms_zero_and_off(client):
+def test_shutdown_confirms_zero_and_off(client, wait_for):
     bank, emus, _ = client
     bank.command([2.0, 2.0, 2.0])
     assert wait_for(lambda: setpoints(emus) == [2.0, 2.0, 2.0])
@@ -65,7 +54,7 @@ def test_shutdown_confirms_zero_and_off(client):
     assert not any(emu.state()['output_on'] for emu in emus)
 
 
-def test_a_vanished_node_leaves_the_coils_at_zero_and_off(client):
+def test_a_vanished_node_leaves_the_coils_at_zero_and_off(client, wait_for):
     bank, emus, _ = client
     bank.command([3.0, -3.0, 3.0])
     assert wait_for(lambda: setpoints(emus) == [3.0, -3.0, 3.0])

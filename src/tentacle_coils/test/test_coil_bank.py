@@ -9,17 +9,8 @@ from tentacle_coils.coil_bank import build_bank
 from tentacle_coils.errors import CommandRejected
 
 
-def wait_for(predicate, timeout_s=3.0):
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.005)
-    return False
-
-
 @pytest.fixture
-def rig(emulate):
+def rig(emulate, wait_for):
     """Return a factory of (enabled bank, its emulators) for a dialect and bank options."""
     banks = []
 
@@ -48,7 +39,7 @@ def set_entries(emu, since=0.0):
 
 
 @pytest.mark.parametrize('dialect', ['dxkdp', 'scpi'])
-def test_each_command_reaches_each_supply(rig, dialect):
+def test_each_command_reaches_each_supply(rig, dialect, wait_for):
     bank, emus = rig(dialect)
     bank.command([1.5, -2.25, 3.0])
     assert wait_for(lambda: setpoints(emus) == [1.5, -2.25, 3.0])
@@ -57,7 +48,7 @@ def test_each_command_reaches_each_supply(rig, dialect):
                                         atol=0.02))
 
 
-def test_slew_rate_is_never_exceeded(rig):
+def test_slew_rate_is_never_exceeded(rig, wait_for):
     slew = 100.0
     bank, emus = rig(slew_rate_a_per_s=slew)
     t_command = time.monotonic()
@@ -72,7 +63,7 @@ def test_slew_rate_is_never_exceeded(rig):
         assert len(entries) > 5  # ramped in steps, not jumped
 
 
-def test_rejected_commands_never_reach_the_wire(rig):
+def test_rejected_commands_never_reach_the_wire(rig, wait_for):
     bank, emus = rig()
     bank.command([1.0, 1.0, 1.0])
     assert wait_for(lambda: setpoints(emus) == [1.0, 1.0, 1.0])
@@ -85,7 +76,7 @@ def test_rejected_commands_never_reach_the_wire(rig):
     assert all(value == 1.0 for emu in emus for _, value in set_entries(emu, since=t_bad))
 
 
-def test_commands_need_enable(rig):
+def test_commands_need_enable(rig, wait_for):
     bank, emus = rig()
     assert bank.enable(False)[0]
     assert wait_for(lambda: not any(emu.state()['output_on'] for emu in emus))
@@ -93,7 +84,7 @@ def test_commands_need_enable(rig):
         bank.command([1.0, 0, 0])
 
 
-def test_watchdog_ramps_to_zero_and_leaves_outputs_on(rig):
+def test_watchdog_ramps_to_zero_and_leaves_outputs_on(rig, wait_for):
     bank, emus = rig(watchdog_s=0.3)
     bank.command([2.0, 2.0, 2.0])
     assert wait_for(lambda: setpoints(emus) == [2.0, 2.0, 2.0])
@@ -104,7 +95,7 @@ def test_watchdog_ramps_to_zero_and_leaves_outputs_on(rig):
     assert wait_for(lambda: setpoints(emus)[0] == 1.0)
 
 
-def test_supply_that_stops_answering_zeroes_all_axes_then_recovers(rig):
+def test_supply_that_stops_answering_zeroes_all_axes_then_recovers(rig, wait_for):
     bank, emus = rig(retries=2)
     bank.command([3.0, 3.0, 3.0])
     assert wait_for(lambda: setpoints(emus) == [3.0, 3.0, 3.0])
@@ -118,7 +109,7 @@ def test_supply_that_stops_answering_zeroes_all_axes_then_recovers(rig):
     assert wait_for(lambda: setpoints(emus) == [1.0, 1.0, 1.0])
 
 
-def test_lost_supply_reconnects_and_is_driven_to_zero_not_its_stale_setpoint(rig):
+def test_lost_supply_reconnects_and_is_driven_to_zero_not_its_stale_setpoint(rig, wait_for):
     bank, emus = rig()
     bank.command([2.0, 2.0, 2.0])
     assert wait_for(lambda: setpoints(emus) == [2.0, 2.0, 2.0])
@@ -133,7 +124,7 @@ def test_lost_supply_reconnects_and_is_driven_to_zero_not_its_stale_setpoint(rig
     assert bank.channels[2].snapshot()['connected']
 
 
-def test_estop_stops_and_release_needs_a_new_command(rig):
+def test_estop_stops_and_release_needs_a_new_command(rig, wait_for):
     bank, emus = rig()
     bank.command([2.0, -2.0, 2.0])
     assert wait_for(lambda: setpoints(emus) == [2.0, -2.0, 2.0])
@@ -150,7 +141,7 @@ def test_estop_stops_and_release_needs_a_new_command(rig):
     assert wait_for(lambda: setpoints(emus) == [1.0, 1.0, 1.0])
 
 
-def test_shutdown_ramps_to_zero_then_switches_off(rig):
+def test_shutdown_ramps_to_zero_then_switches_off(rig, wait_for):
     bank, emus = rig(slew_rate_a_per_s=50.0)
     bank.command([5.0, 5.0, -5.0])
     assert wait_for(lambda: setpoints(emus) == [5.0, 5.0, -5.0])

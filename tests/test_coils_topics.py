@@ -246,3 +246,16 @@ def test_killed_node_still_leaves_the_coils_at_zero_and_off(coil_rig, probe):
     assert wait_for(lambda: emulators.setpoints()[0] > 7.0)
     node.stop(signal.SIGKILL)  # no chance to clean up: the bank process sees its input close
     assert wait_for(lambda: emulators.setpoints() == [0.0] * 3 and not any(emulators.outputs()))
+
+
+@pytest.mark.parametrize('params, message', [
+    ({'max_current': 40}, 'max_current'),                 # an integer for a double
+    ({'max_current': 500.0}, 'max_current'),              # out of range
+    ({'actuation_matrix': [1.0] * 9}, 'singular'),
+    ({'polarity_mode': 'maybe'}, "polarity_mode 'maybe'"),
+    ({'ports': ['/dev/a', '/dev/b']}, 'ports needs 3 entries')])
+def test_bad_configuration_stops_the_node_with_the_reason(coil_rig, params, message):
+    emulators, node = coil_rig('dxkdp', 115200, **params)
+    assert node.popen.wait(20) == 2, node.output()
+    assert 'coils_node: not started' in node.output() and message in node.output()
+    assert emulators.sets_since(0.0) == {'x': [], 'y': [], 'z': []}  # nothing reached a wire

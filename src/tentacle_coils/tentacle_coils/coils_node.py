@@ -16,6 +16,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Vector3Stamped
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 import rclpy
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -222,8 +223,8 @@ def main(args=None):
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except CoilsError as exc:
-        print(f'coils_node: {exc}', file=sys.stderr)
+    except (CoilsError, ParameterException) as exc:
+        print(f'coils_node: not started: {exc}', file=sys.stderr)
         sys.exit(2)
     finally:
         if node is not None:

@@ -65,9 +65,10 @@ class CoilRig:
         workdir = pathlib.Path(workdir)
         self.emulators = EmulatorProcess(workdir / 'ports', dialect, baud, emulator_args, cwd)
         try:
-            params_file = write_coils_params(
-                base_params, workdir / 'coils_params.yaml', dialect=dialect, baud=baud,
-                ports=[self.emulators.ports[n] for n in 'xyz'], **params)
+            overrides = {'dialect': dialect, 'baud': baud,
+                         'ports': [self.emulators.ports[n] for n in 'xyz'], **params}
+            params_file = write_coils_params(base_params, workdir / 'coils_params.yaml',
+                                             **overrides)
             self.node = NodeProcess([sys.executable, '-m', 'tentacle_coils.coils_node',
                                      '--ros-args', '--params-file', str(params_file)],
                                     str(workdir / 'coils_node.log'), cwd)

@@ -21,6 +21,7 @@ setup(
         'console_scripts': [
             'tentacle-plan = tentacle_planner.plan_cli:main',
             'player_node = tentacle_planner.player_node:main',
+            'tentacle-statics = tentacle_planner.statics_cli:main',
         ],
     },
 )

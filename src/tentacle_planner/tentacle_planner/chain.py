@@ -1,0 +1,88 @@
+"""
+The inserted part of a tentacle as a chain of rigid links joined by sprung joints.
+
+Material coordinate s runs from the proximal end (0) to the tip (L). With ``inserted_m`` of
+the rod pushed past the base, the free part is s in [L - inserted_m, L]; what is still behind
+the base contributes nothing. Each segment is cut into ``sublinks`` equal links and the link
+that straddles the base is cut there (a partial link).
+
+Joint i sits at the proximal end of link i (joint 0 at the clamp). Its stiffness represents
+the rod between the midpoints of links i-1 and i: compliances add,
+1/k_i = (h_{i-1}/2)/EI_{i-1} + (h_i/2)/EI_i, and the clamp joint has only the second half.
+This staggered (midpoint) scheme converges at second order in the link length.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+MIN_LINK_FRACTION = 1e-6  # a partial link shorter than this fraction of its full length is dropped
+
+
+@dataclass(frozen=True)
+class Chain:
+    """Arrays over the free links, base first (shape (n,) or (n, 3)); SI units."""
+
+    lengths_m: np.ndarray          # (n,)
+    stiffness_n_m: np.ndarray      # (n, 3) joint stiffness per radian: bend_1, bend_2, twist
+    moments_a_m2: np.ndarray       # (n, 3) magnetic moment in the link frame
+    masses_kg: np.ndarray          # (n,)
+    s_start_m: np.ndarray          # (n,) material coordinate of each link's proximal end
+    base_position_m: np.ndarray    # (3,)
+    base_rotation: np.ndarray      # (3, 3)
+
+    @property
+    def size(self):
+        """Return the number of links."""
+        return len(self.lengths_m)
+
+
+def discretise(spec, inserted_m=None, sublinks=1, backbone_m=0.0):
+    """
+    Return the Chain of the free part of a tentacle.
+
+    :param spec: a TentacleSpec
+    :param inserted_m: length pushed past the base, m (default: all of it)
+    :param sublinks: links per segment, >= 1
+    :param backbone_m: how far the backbone reaches past the base, m (0: retracted)
+    :raises ValueError: inserted length outside [0, L], sublinks < 1, backbone_m < 0
+    """
+    total = spec.length_m
+    inserted = total if inserted_m is None else float(inserted_m)
+    if not np.isfinite(inserted) or inserted < 0 or inserted > total * (1 + 1e-12):
+        raise ValueError(f'inserted length {inserted_m} m is outside [0, {total:g}] m')
+    if int(sublinks) != sublinks or sublinks < 1:
+        raise ValueError(f'sublinks {sublinks} must be a whole number >= 1')
+    if not np.isfinite(backbone_m) or backbone_m < 0:
+        raise ValueError(f'backbone position {backbone_m} m must be >= 0')
+    inserted = min(inserted, total)
+    s_base = total - inserted
+    rows = []  # (start, length, segment)
+    start = 0.0
+    for segment in spec.segments:
+        h = segment.length_m / sublinks
+        for k in range(int(sublinks)):
+            a, b = start + k * h, start + (k + 1) * h
+            if b <= s_base:
+                continue
+            a_free = max(a, s_base)
+            if b - a_free >= MIN_LINK_FRACTION * h:
+                rows.append((a_free, b - a_free, segment))
+        start += segment.length_m
+    n = len(rows)
+    lengths = np.array([r[1] for r in rows])
+    s_start = np.array([r[0] for r in rows])
+    bend = np.array([r[2].bend_stiffness_n_m2 for r in rows]).reshape(n, 3)
+    if spec.backbone is not None and backbone_m > 0:
+        # Joints within the backbone's reach (free arc length from the base) are stiffened.
+        inside = (s_start - s_base) < backbone_m
+        bend[inside, :2] += spec.backbone.stiffness_n_m2
+    half_compliance = (lengths / 2)[:, None] / bend
+    compliance = half_compliance.copy()
+    compliance[1:] += half_compliance[:-1]
+    stiffness = 1.0 / compliance if n else np.zeros((0, 3))
+    moments = np.array([r[2].magnetisation_a_per_m * r[2].area_m2 * r[1]
+                        for r in rows]).reshape(n, 3)
+    masses = np.array([r[2].density_kg_m3 * r[2].area_m2 * r[1] for r in rows])
+    return Chain(lengths, stiffness, moments, masses, s_start, spec.base_position_m,
+                 spec.base_rotation)

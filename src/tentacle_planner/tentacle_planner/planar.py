@@ -1,0 +1,78 @@
+"""
+Planar (1-DoF joints) potential energy of a chain, its gradient and its banded Hessian.
+
+Coordinates: theta (n,), the absolute angle of each link in the base plane, radian, measured
+from the insertion direction (joint angles are q_i = theta_i - theta_{i-1}, theta_{-1} = 0).
+In these coordinates the elastic energy is tridiagonal and every load is diagonal, so a Newton
+step costs O(n).
+
+A uniform field exerts only a torque on a link; the energy of link i, -m_i . B, and the
+gravitational energy of everything distal of it (its moment arm) both have the form
+-(a_i cos theta_i + b_i sin theta_i):
+
+    U(theta) = 1/2 sum_i k_i (theta_i - theta_{i-1})^2 - sum_i (a_i cos theta_i + b_i sin theta_i)
+
+with a_i = m_x B_x + m_y B_y + W_i h_i g_x and b_i = m_x B_y - m_y B_x + W_i h_i g_y, where
+(m_x, m_y) is the moment in the link frame, B and g are projected on the base plane and
+W_i = (mass distal of link i) + (half of link i's mass).
+"""
+
+import numpy as np
+
+
+def loads(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0)):
+    """
+    Return (a, b), each (n,), in N m: the load coefficients in the base plane.
+
+    :param field_t: (3,) uniform field in the world frame, tesla
+    :param gravity_m_s2: (3,) gravitational acceleration in the world frame
+    """
+    axes = chain.base_rotation[:, :2]  # base plane: insertion direction, normal
+    bx, by = axes.T @ np.asarray(field_t, dtype=float)
+    gx, gy = axes.T @ np.asarray(gravity_m_s2, dtype=float)
+    mx, my = chain.moments_a_m2[:, 0], chain.moments_a_m2[:, 1]
+    masses = chain.masses_kg
+    distal = np.cumsum(masses[::-1])[::-1] - masses  # mass beyond each link
+    lever = (distal + masses / 2) * chain.lengths_m
+    return mx * bx + my * by + lever * gx, mx * by - my * bx + lever * gy
+
+
+def energy(theta, k, a, b):
+    """Return the total potential energy, J."""
+    dq = np.diff(theta, prepend=0.0)
+    return 0.5 * np.dot(k, dq * dq) - np.dot(a, np.cos(theta)) - np.dot(b, np.sin(theta))
+
+
+def gradient(theta, k, a, b):
+    """Return dU/dtheta (n,), N m."""
+    torque = k * np.diff(theta, prepend=0.0)       # elastic torque at each joint
+    g = torque.copy()
+    g[:-1] -= torque[1:]
+    return g + a * np.sin(theta) - b * np.cos(theta)
+
+
+def hessian_banded(theta, k, a, b):
+    """
+    Return the Hessian in upper banded form (2, n) for scipy.linalg.solveh_banded.
+
+    Row 1 is the diagonal, row 0 (from column 1) the superdiagonal.
+    """
+    diag = k + a * np.cos(theta) + b * np.sin(theta)
+    diag[:-1] += k[1:]
+    banded = np.zeros((2, len(theta)))
+    banded[1] = diag
+    banded[0, 1:] = -k[1:]
+    return banded
+
+
+def hessian_dense(theta, k, a, b):
+    """Return the Hessian as a dense (n, n) array (for tests and small chains)."""
+    banded = hessian_banded(theta, k, a, b)
+    return np.diag(banded[1]) + np.diag(banded[0, 1:], 1) + np.diag(banded[0, 1:], -1)
+
+
+def points(chain, theta):
+    """Return the joint positions and the tip, (n + 1, 3), m, base first."""
+    steps = chain.lengths_m[:, None] * np.column_stack([np.cos(theta), np.sin(theta)])
+    planar = np.vstack([np.zeros(2), np.cumsum(steps, axis=0)])
+    return chain.base_position_m + planar @ chain.base_rotation[:, :2].T

@@ -1,0 +1,78 @@
+"""
+tentacle-statics: the equilibrium of a tentacle in a uniform field, for what-ifs.
+
+    tentacle-statics --tentacle config/tentacles/cantilever.yaml --field 0 0.005 0 --json
+
+Prints the centreline, the tip position and heading, the stability (smallest Hessian
+eigenvalue) and whether the solve converged. Exit code 0 when converged, 3 when not (the
+result is still printed), 2 for bad input.
+"""
+
+import argparse
+import json
+import sys
+
+import numpy as np
+from tentacle_planner.chain import discretise
+from tentacle_planner.statics import solve_planar
+from tentacle_planner.tentacle_spec import load_tentacle, SpecError
+
+
+def build_parser():
+    """Return the command-line parser."""
+    parser = argparse.ArgumentParser(prog='tentacle-statics',
+                                     description=__doc__.strip().split('\n')[0])
+    parser.add_argument('--tentacle', required=True, help='tentacle YAML file')
+    parser.add_argument('--field', nargs=3, type=float, required=True,
+                        metavar=('BX', 'BY', 'BZ'), help='uniform field, tesla')
+    parser.add_argument('--inserted', type=float, default=None, metavar='METRES',
+                        help='length pushed past the base (default: all)')
+    parser.add_argument('--sublinks', type=int, default=20, help='links per segment')
+    parser.add_argument('--dof', type=int, choices=(1, 3), default=1,
+                        help='joint degrees of freedom: 1 planar, 3 bend-bend-twist')
+    parser.add_argument('--gravity', nargs=3, type=float, default=(0.0, 0.0, 0.0),
+                        metavar=('GX', 'GY', 'GZ'), help='gravity, m/s^2 (default none)')
+    parser.add_argument('--json', action='store_true', help='print one JSON object')
+    return parser
+
+
+def main(args=None):
+    """Solve and print; return the exit code."""
+    opts = build_parser().parse_args(args)
+    if opts.dof == 3:
+        print('tentacle-statics: 3-DoF joints are not implemented yet; use --dof 1',
+              file=sys.stderr)
+        return 2
+    try:
+        spec = load_tentacle(opts.tentacle)
+        chain = discretise(spec, opts.inserted, opts.sublinks)
+        eq = solve_planar(chain, opts.field, opts.gravity)
+    except (SpecError, ValueError) as exc:
+        print(f'tentacle-statics: {exc}', file=sys.stderr)
+        return 2
+    result = {
+        'tentacle': spec.name, 'field_t': list(opts.field), 'inserted_m': float(
+            chain.lengths_m.sum()), 'links': chain.size, 'dof': opts.dof,
+        'tip': eq.tip_m.tolist(), 'heading': eq.heading.tolist(),
+        'converged': eq.converged, 'reason': eq.reason, 'iterations': eq.iterations,
+        'residual': eq.residual, 'stability': None if np.isnan(eq.stability) else eq.stability,
+        'energy_j': eq.energy_j, 'points': eq.points_m.tolist()}
+    if opts.json:
+        print(json.dumps(result))
+    else:
+        print(f'{spec.name}: {chain.size} links, {result["inserted_m"] * 1e3:.3f} mm inserted, '
+              f'field {np.round(np.array(opts.field) * 1e3, 4).tolist()} mT')
+        print('centreline (mm):')
+        for p in eq.points_m:
+            print(f'  {p[0] * 1e3:9.4f} {p[1] * 1e3:9.4f} {p[2] * 1e3:9.4f}')
+        print(f'tip (mm): {np.round(eq.tip_m * 1e3, 4).tolist()}   heading: '
+              f'{np.round(eq.heading, 4).tolist()}')
+        print(f'{"converged" if eq.converged else "NOT CONVERGED"}: {eq.reason} '
+              f'({eq.iterations} iterations, residual {eq.residual:.2e})')
+        print(f'stability (smallest Hessian eigenvalue): {eq.stability:.4g} N m/rad^2'
+              + ('  UNSTABLE' if eq.stability < 0 else ''))
+    return 0 if eq.converged else 3
+
+
+if __name__ == '__main__':
+    sys.exit(main())

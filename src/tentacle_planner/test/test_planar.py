@@ -1,0 +1,45 @@
+"""Planar energy: gradient and Hessian against central finite differences."""
+
+import numpy as np
+import pytest
+from tentacle_planner import planar
+from tentacle_planner.chain import Chain
+
+
+def random_chain(n=7, seed=0):
+    rng = np.random.default_rng(seed)
+    return Chain(lengths_m=rng.uniform(1e-3, 5e-3, n),
+                 stiffness_n_m=rng.uniform(1e-5, 1e-3, (n, 3)),
+                 moments_a_m2=rng.normal(0, 1e-3, (n, 3)), masses_kg=rng.uniform(0, 1e-3, n),
+                 s_start_m=np.zeros(n), base_position_m=np.zeros(3), base_rotation=np.eye(3))
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_gradient_and_hessian_match_finite_differences(seed):
+    chain = random_chain(seed=seed)
+    a, b = planar.loads(chain, [0.01, -0.02, 0.005], [0.0, -9.81, 0.0])
+    k = chain.stiffness_n_m[:, 0]
+    theta = np.random.default_rng(seed + 10).uniform(-2, 2, chain.size)
+    eps = 1e-6
+    eye = np.eye(chain.size)
+    fd_grad = np.array([(planar.energy(theta + eps * e, k, a, b)
+                         - planar.energy(theta - eps * e, k, a, b)) / (2 * eps) for e in eye])
+    grad = planar.gradient(theta, k, a, b)
+    np.testing.assert_allclose(grad, fd_grad, rtol=1e-6, atol=1e-9 * np.abs(grad).max())
+    fd_hess = np.array([(planar.gradient(theta + eps * e, k, a, b)
+                         - planar.gradient(theta - eps * e, k, a, b)) / (2 * eps) for e in eye])
+    hess = planar.hessian_dense(theta, k, a, b)
+    np.testing.assert_allclose(hess, fd_hess, rtol=1e-6, atol=1e-9 * np.abs(hess).max())
+
+
+def test_gravity_energy_is_the_height_of_the_centres_of_mass():
+    chain = random_chain(seed=5)
+    chain = Chain(chain.lengths_m, chain.stiffness_n_m, np.zeros((chain.size, 3)),
+                  chain.masses_kg, chain.s_start_m, chain.base_position_m, chain.base_rotation)
+    theta = np.linspace(0.3, -1.2, chain.size)
+    a, b = planar.loads(chain, [0, 0, 0], [0.0, -9.81, 0.0])
+    pts = planar.points(chain, theta)
+    centres = (pts[:-1] + pts[1:]) / 2
+    elastic = 0.5 * np.dot(chain.stiffness_n_m[:, 0], np.diff(theta, prepend=0.0) ** 2)
+    expected = elastic + np.sum(chain.masses_kg * 9.81 * centres[:, 1])
+    assert planar.energy(theta, chain.stiffness_n_m[:, 0], a, b) == pytest.approx(expected)

@@ -16,7 +16,8 @@ Format (see config/tentacles/cantilever.yaml)::
         magnetisation: {remanence_t: 0.107, direction: [1.0, 0.0, 0.0]}  # link frame; or none
     backbone:                      # optional stiffening backbone (thesis chapter 6)
       youngs_modulus_pa: 5.0e10
-      diameter_m: 0.0003
+      diameter_m: 0.0005           # of each rod
+      count: 2                     # rods (default 1)
 
 ``bend_1`` is bending in the base plane (about the link z axis), ``bend_2`` out of it (about
 link y), ``twist`` about the link axis (a pseudo-modulus with the polar moment, as thesis
@@ -196,11 +197,16 @@ def parse_tentacle(document, source='<tentacle>'):
     segments = tuple(_segment(read, raw, f'segments[{i}]') for i, raw in enumerate(segments))
     backbone = None
     if doc.get('backbone') is not None:
-        raw = read.mapping(doc['backbone'], 'backbone', {'youngs_modulus_pa', 'diameter_m'},
+        raw = read.mapping(doc['backbone'], 'backbone',
+                           {'youngs_modulus_pa', 'diameter_m', 'count'},
                            ('youngs_modulus_pa', 'diameter_m'))
         e = read.number(raw['youngs_modulus_pa'], 'backbone.youngs_modulus_pa')
         d = read.number(raw['diameter_m'], 'backbone.diameter_m')
-        backbone = Backbone(e * math.pi * d ** 4 / 64)
+        count = read.number(raw.get('count', 1), 'backbone.count')
+        if count != int(count):
+            read.fail('backbone.count', f'{count:g} is not a whole number of rods')
+        # Thesis eq. 6.4: n rods of radius r, I = n pi r^4 / 4 (bending about their centres).
+        backbone = Backbone(e * count * math.pi * d ** 4 / 64)
     return TentacleSpec(str(doc.get('name', pathlib.Path(str(source)).stem)), position,
                         rotation, segments, backbone)
 

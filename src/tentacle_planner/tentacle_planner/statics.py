@@ -10,18 +10,20 @@ of times). Every result says whether it converged and why, with the iteration co
 residual and the stability (the smallest Hessian eigenvalue: negative or near zero means
 unstable or at a bifurcation). It never returns NaN silently.
 
-Only planar (1-DoF joint) chains are solved so far; 3-DoF joints are the next step.
+Two joint models share the minimiser: planar 1-DoF joints (planar.py, O(n) per step with
+a tridiagonal Hessian) and 3-DoF bend-bend-twist joints (spatial.py, dense Hessian).
 """
 
 from dataclasses import dataclass
 import time
 
 import numpy as np
-from scipy.linalg import eigh_tridiagonal, LinAlgError, solveh_banded
+from scipy.linalg import cho_factor, cho_solve, eigh, eigh_tridiagonal, LinAlgError, \
+    solveh_banded
 
-from tentacle_planner import planar
+from tentacle_planner import planar, spatial
 
-MAX_STEP_RAD = 0.5       # largest change of any link angle in one Newton step
+MAX_STEP_RAD = 0.5       # largest change of any angle in one Newton step
 MAX_SADDLE_ESCAPES = 5
 ESCAPE_STEP_RAD = 0.05
 
@@ -30,12 +32,12 @@ ESCAPE_STEP_RAD = 0.05
 class Equilibrium:
     """A solve's result; arrays over links base first, SI units."""
 
-    angles_rad: np.ndarray    # (n,) absolute link angles in the base plane
+    angles_rad: np.ndarray    # planar: (n,) absolute link angles; 3-DoF: (n, 3) joint angles
     points_m: np.ndarray      # (n + 1, 3) joints and tip, world frame
     converged: bool
     reason: str
     iterations: int
-    residual: float           # max |dU/dtheta| over the torque scale of the loads
+    residual: float           # max |dU/dq| over the largest torque in the balance
     stability: float          # smallest Hessian eigenvalue, N m / rad^2 (nan if unknown)
     energy_j: float
 
@@ -47,119 +49,201 @@ class Equilibrium:
     @property
     def heading(self):
         """Return the tip's unit direction (3,) in the world frame."""
-        step = self.points_m[-1] - self.points_m[-2] if len(self.points_m) > 1 else None
-        if step is None:
+        if len(self.points_m) < 2:
             return np.array([1.0, 0.0, 0.0])
+        step = self.points_m[-1] - self.points_m[-2]
         return step / np.linalg.norm(step)
 
 
-def _smallest_eigen(banded):
-    """Return (smallest eigenvalue, its eigenvector) of a banded symmetric tridiagonal."""
-    if banded.shape[1] == 1:
-        return float(banded[1, 0]), np.ones(1)
-    values, vectors = eigh_tridiagonal(banded[1], banded[0, 1:], select='i',
-                                       select_range=(0, 0))
-    return float(values[0]), vectors[:, 0]
+class _Planar:
+    """Planar chain: x = absolute link angles (n,)."""
+
+    def __init__(self, chain, field_t, gravity_m_s2):
+        self.chain = chain
+        self.k = chain.stiffness_n_m[:, 0]
+        self.a, self.b = planar.loads(chain, field_t, gravity_m_s2)
+        self.load_scale = np.max(np.abs(self.a) + np.abs(self.b))
+        self.size = chain.size
+
+    def energy(self, x):
+        return planar.energy(x, self.k, self.a, self.b)
+
+    def gradient(self, x):
+        return planar.gradient(x, self.k, self.a, self.b)
+
+    def torque_scale(self, x):
+        return max(self.load_scale, np.max(np.abs(self.k * np.diff(x, prepend=0.0))),
+                   1e-9 * np.max(self.k), 1e-300)
+
+    def newton_step(self, x, g):
+        banded = planar.hessian_banded(x, self.k, self.a, self.b)
+        if self.size == 1:  # LAPACK's banded solver needs two
+            curvature = banded[1, 0]
+            scale = max(abs(curvature), 1e-300)
+            return -g / (curvature if curvature > 0 else abs(curvature) + 1e-8 * scale)
+        return _shifted_solve(lambda shift: solveh_banded(
+            banded + np.array([[0.0], [shift]]), g, check_finite=False), banded[1], g)
+
+    def smallest_eigen(self, x):
+        banded = planar.hessian_banded(x, self.k, self.a, self.b)
+        if self.size == 1:
+            return float(banded[1, 0]), np.ones(1), abs(banded[1, 0])
+        values, vectors = eigh_tridiagonal(banded[1], banded[0, 1:], select='i',
+                                           select_range=(0, 0))
+        return float(values[0]), vectors[:, 0], np.max(np.abs(banded[1]))
+
+    def result(self, x):
+        return x, planar.points(self.chain, x)
 
 
-def _newton_direction(banded, g):
-    """Return a descent direction: a (shifted where needed) Newton step."""
+class _Spatial:
+    """3-DoF chain: x = joint angles flattened (3n,)."""
+
+    def __init__(self, chain, field_t, gravity_m_s2):
+        self.chain = chain
+        self.field, self.gravity = field_t, gravity_m_s2
+        self.size = 3 * chain.size
+        self._cache = (None, None)
+
+    def loads(self, x):
+        key, value = self._cache
+        if key is None or not np.array_equal(key, x):
+            value = spatial.Loads(self.chain, x.reshape(-1, 3), self.field, self.gravity)
+            self._cache = (x.copy(), value)
+        return value
+
+    def energy(self, x):
+        return spatial.energy(self.chain, x.reshape(-1, 3), self.loads(x))
+
+    def gradient(self, x):
+        return spatial.gradient(self.chain, x.reshape(-1, 3), self.loads(x)).reshape(-1)
+
+    def torque_scale(self, x):
+        loads = self.loads(x)
+        return max(np.max(np.linalg.norm(loads.T, axis=1)),
+                   np.max(np.abs(self.chain.stiffness_n_m.reshape(-1) * x)),
+                   1e-9 * np.max(self.chain.stiffness_n_m), 1e-300)
+
+    def hessian(self, x):
+        return spatial.hessian(self.chain, x.reshape(-1, 3), self.loads(x))
+
+    def newton_step(self, x, g):
+        h = self.hessian(x)
+        eye = np.eye(len(g))
+        return _shifted_solve(lambda shift: cho_solve(cho_factor(h + shift * eye), g),
+                              np.diag(h), g)
+
+    def smallest_eigen(self, x):
+        h = self.hessian(x)
+        values, vectors = eigh(h, subset_by_index=[0, 0])
+        return float(values[0]), vectors[:, 0], np.max(np.abs(np.diag(h)))
+
+    def result(self, x):
+        rotations, _ = spatial.kinematics(self.chain, x.reshape(-1, 3))
+        return x.reshape(-1, 3), spatial.points(self.chain, rotations)
+
+
+def _shifted_solve(solve_with_shift, diagonal, g):
+    """Return -H^-1 g, shifting H by a growing multiple of I until it factorises."""
+    scale = max(np.max(np.abs(diagonal)), 1e-300)
     shift = 0.0
-    scale = max(np.max(np.abs(banded[1])), 1e-300)
-    if banded.shape[1] == 1:  # one link: LAPACK's banded solver needs two
-        curvature = banded[1, 0]
-        return -g / (curvature if curvature > 0 else abs(curvature) + 1e-8 * scale)
     for _ in range(40):
-        shifted = banded.copy()
-        shifted[1] += shift
         try:
-            return -solveh_banded(shifted, g, check_finite=False)
+            return -solve_with_shift(shift)
         except LinAlgError:
             shift = max(shift * 10.0, 1e-8 * scale)
     return -g / scale
 
 
-def solve_planar(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), initial=None, tol=1e-9,
-                 max_iterations=500, time_limit_s=10.0):
+def _minimise(problem, x, tol, max_iterations, time_limit_s):
+    """Return (x, reason, iterations, residual) of a damped Newton minimisation."""
+    deadline = time.monotonic() + time_limit_s
+    iterations = escapes = 0
+    while True:
+        g = problem.gradient(x)
+        residual = float(np.max(np.abs(g)) / problem.torque_scale(x))
+        if not np.isfinite(residual):
+            return x, 'non-finite gradient', iterations, residual
+        if residual <= tol:
+            value, mode, diag_scale = problem.smallest_eigen(x)
+            if value < -1e-9 * diag_scale and escapes < MAX_SADDLE_ESCAPES:
+                escapes += 1
+                x = x + ESCAPE_STEP_RAD * np.sign(mode.sum() or 1.0) * mode / np.max(
+                    np.abs(mode))
+                continue
+            return x, 'converged' + (f' after leaving {escapes} saddle(s)' if escapes
+                                     else ''), iterations, residual
+        if iterations >= max_iterations:
+            return x, f'no convergence in {max_iterations} iterations', iterations, residual
+        if time.monotonic() > deadline:
+            return x, f'no convergence within the {time_limit_s:g} s limit', iterations, \
+                residual
+        iterations += 1
+        step = problem.newton_step(x, g)
+        biggest = np.max(np.abs(step))
+        if biggest > MAX_STEP_RAD:
+            step *= MAX_STEP_RAD / biggest
+        u0, slope = problem.energy(x), float(g @ step)
+        alpha = 1.0
+        while alpha > 1e-12:
+            trial = x + alpha * step
+            u = problem.energy(trial)
+            if u <= u0 + 1e-4 * alpha * slope:
+                break
+            if abs(u - u0) <= 1e-13 * abs(u0) and np.max(np.abs(
+                    problem.gradient(trial))) < np.max(np.abs(g)):
+                break  # energy changes are round-off here: let the gradient decide
+            alpha *= 0.5
+        else:
+            if residual <= 1e3 * tol:
+                return x, 'converged (at round-off)', iterations, residual
+            return x, f'line search failed (residual {residual:.3g})', iterations, residual
+        x = trial
+
+
+def solve(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=1, initial=None, tol=1e-9,
+          max_iterations=500, time_limit_s=10.0):
     """
-    Return the Equilibrium of a planar chain.
+    Return the Equilibrium of a chain.
 
     :param chain: a Chain (chain.py)
     :param field_t: (3,) uniform field, tesla, world frame
     :param gravity_m_s2: (3,) gravity, world frame (zero: no gravity)
-    :param initial: (n,) link angles to start from (the previous state), rad
-    :param tol: converged when max |dU/dtheta| <= tol * torque scale
+    :param dof: 1 (planar joints) or 3 (bend, bend, twist)
+    :param initial: the previous state to start from: (n,) link angles for dof 1, (n, 3)
+        joint angles for dof 3, rad
+    :param tol: converged when max |dU/dq| <= tol * the largest torque in the balance
+    :raises ValueError: non-finite field or gravity, an initial state of the wrong shape
     """
     n = chain.size
+    if dof not in (1, 3):
+        raise ValueError(f'dof {dof} is not 1 or 3')
+    field_t = np.asarray(field_t, dtype=float).reshape(-1)
+    gravity_m_s2 = np.asarray(gravity_m_s2, dtype=float).reshape(-1)
+    if not (field_t.size == gravity_m_s2.size == 3 and np.all(np.isfinite(field_t))
+            and np.all(np.isfinite(gravity_m_s2))):
+        raise ValueError(f'field {field_t} T and gravity {gravity_m_s2} m/s^2 must be three '
+                         'finite numbers each')
     if n == 0:
-        return Equilibrium(np.zeros(0), chain.base_position_m[None, :].copy(), True,
-                           'nothing inserted', 0, 0.0, np.nan, 0.0)
-    field_t = np.asarray(field_t, dtype=float)
-    gravity_m_s2 = np.asarray(gravity_m_s2, dtype=float)
-    if not (np.all(np.isfinite(field_t)) and np.all(np.isfinite(gravity_m_s2))):
-        raise ValueError(f'field {field_t} T and gravity {gravity_m_s2} m/s^2 must be finite')
-    k = chain.stiffness_n_m[:, 0]
-    a, b = planar.loads(chain, field_t, gravity_m_s2)
-    theta = np.zeros(n) if initial is None else np.array(initial, dtype=float)
-    if theta.shape != (n,) or not np.all(np.isfinite(theta)):
-        raise ValueError(f'initial angles must be {n} finite numbers')
-    load_scale = max(np.max(np.abs(a) + np.abs(b)), 1e-9 * np.max(k), 1e-300)
-    deadline = time.monotonic() + time_limit_s
-    iterations = escapes = 0
-    reason = ''
-    while True:
-        g = planar.gradient(theta, k, a, b)
-        # Relative to the largest torque in the balance, so round-off sets the same floor
-        # whether the loads or the springs dominate.
-        scale = max(load_scale, np.max(np.abs(k * np.diff(theta, prepend=0.0))))
-        residual = float(np.max(np.abs(g)) / scale)
-        if not np.isfinite(residual):
-            reason = 'non-finite gradient'
-            break
-        if residual <= tol:
-            banded = planar.hessian_banded(theta, k, a, b)
-            stability, mode = _smallest_eigen(banded)
-            if stability < -1e-9 * np.max(banded[1]) and escapes < MAX_SADDLE_ESCAPES:
-                escapes += 1
-                theta = theta + ESCAPE_STEP_RAD * np.sign(mode.sum() or 1.0) * mode / np.max(
-                    np.abs(mode))
-                continue
-            reason = 'converged' + (f' after leaving {escapes} saddle(s)' if escapes else '')
-            break
-        if iterations >= max_iterations:
-            reason = f'no convergence in {max_iterations} iterations'
-            break
-        if time.monotonic() > deadline:
-            reason = f'no convergence within the {time_limit_s:g} s limit'
-            break
-        iterations += 1
-        banded = planar.hessian_banded(theta, k, a, b)
-        step = _newton_direction(banded, g)
-        biggest = np.max(np.abs(step))
-        if biggest > MAX_STEP_RAD:
-            step *= MAX_STEP_RAD / biggest
-        u0, slope = planar.energy(theta, k, a, b), float(g @ step)
-        alpha = 1.0
-        while alpha > 1e-12:
-            trial = theta + alpha * step
-            u = planar.energy(trial, k, a, b)
-            if u <= u0 + 1e-4 * alpha * slope:
-                break
-            if abs(u - u0) <= 1e-13 * abs(u0) and np.max(np.abs(
-                    planar.gradient(trial, k, a, b))) < np.max(np.abs(g)):
-                break  # energy changes are round-off here: let the gradient decide
-            alpha *= 0.5
-        else:
-            if residual <= 1e3 * tol:  # at the floor of round-off: as good as it gets
-                reason = 'converged (at round-off)'
-                break
-            reason = f'line search failed (residual {residual:.3g})'
-            break
-        theta = trial
-    converged = reason.startswith('converged')
-    stability = np.nan
-    if np.all(np.isfinite(theta)):
-        stability, _ = _smallest_eigen(planar.hessian_banded(theta, k, a, b))
-    return Equilibrium(theta, planar.points(chain, theta) if np.all(np.isfinite(theta))
-                       else np.full((n + 1, 3), np.nan), converged, reason, iterations,
-                       residual, stability, float(planar.energy(theta, k, a, b)))
+        return Equilibrium(np.zeros((0,) if dof == 1 else (0, 3)),
+                           chain.base_position_m[None, :].copy(), True, 'nothing inserted',
+                           0, 0.0, np.nan, 0.0)
+    problem = (_Planar if dof == 1 else _Spatial)(chain, field_t, gravity_m_s2)
+    shape = (n,) if dof == 1 else (n, 3)
+    x = np.zeros(shape) if initial is None else np.array(initial, dtype=float)
+    if x.shape != shape or not np.all(np.isfinite(x)):
+        raise ValueError(f'initial angles must be finite numbers of shape {shape}')
+    x, reason, iterations, residual = _minimise(problem, x.reshape(-1), tol, max_iterations,
+                                                time_limit_s)
+    if not np.all(np.isfinite(x)):
+        return Equilibrium(np.full(shape, np.nan), np.full((n + 1, 3), np.nan), False,
+                           reason, iterations, residual, np.nan, np.nan)
+    stability = problem.smallest_eigen(x)[0]
+    angles, points = problem.result(x)
+    return Equilibrium(angles, points, reason.startswith('converged'), reason, iterations,
+                       residual, stability, float(problem.energy(x)))
+
+
+def solve_planar(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), **options):
+    """Return the Equilibrium with planar 1-DoF joints (see solve)."""
+    return solve(chain, field_t, gravity_m_s2, dof=1, **options)

@@ -14,7 +14,7 @@ import sys
 
 import numpy as np
 from tentacle_planner.chain import discretise
-from tentacle_planner.statics import solve_planar
+from tentacle_planner.statics import solve
 from tentacle_planner.tentacle_spec import load_tentacle, SpecError
 
 
@@ -39,14 +39,10 @@ def build_parser():
 def main(args=None):
     """Solve and print; return the exit code."""
     opts = build_parser().parse_args(args)
-    if opts.dof == 3:
-        print('tentacle-statics: 3-DoF joints are not implemented yet; use --dof 1',
-              file=sys.stderr)
-        return 2
     try:
         spec = load_tentacle(opts.tentacle)
         chain = discretise(spec, opts.inserted, opts.sublinks)
-        eq = solve_planar(chain, opts.field, opts.gravity)
+        eq = solve(chain, opts.field, opts.gravity, dof=opts.dof)
     except (SpecError, ValueError) as exc:
         print(f'tentacle-statics: {exc}', file=sys.stderr)
         return 2

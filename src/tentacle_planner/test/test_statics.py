@@ -122,7 +122,7 @@ def test_bad_inputs_raise(cantilever):
     chain = discretise(cantilever[0], sublinks=4)
     with pytest.raises(ValueError, match='finite'):
         solve_planar(chain, [np.nan, 0, 0])
-    with pytest.raises(ValueError, match='4 finite'):
+    with pytest.raises(ValueError, match='shape'):
         solve_planar(chain, [0.001, 0, 0], initial=np.zeros(3))
 
 
@@ -136,3 +136,12 @@ def test_command_line_json(capsys):
     np.testing.assert_allclose(out['tip'], [0.010675, 0.015271, 0.0], atol=3e-6)  # NOTES.md
     assert main(['--tentacle', 'nope.yaml', '--field', '0', '0', '0']) == 2
     assert 'nope.yaml' in capsys.readouterr().err
+
+
+def test_command_line_three_dof_out_of_plane(capsys):
+    from tentacle_planner.statics_cli import main
+    path = pathlib.Path(__file__).resolve().parents[3] / 'config/tentacles/cantilever.yaml'
+    assert main(['--tentacle', str(path), '--field', '0', '0', '0.005', '--dof', '3',
+                 '--json']) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out['converged'] and out['tip'][2] > 0.01 and abs(out['tip'][1]) < 1e-12

@@ -23,6 +23,13 @@ vector too (d v / d q_f = a_f x v).
 import numpy as np
 
 
+def cross(a, b):
+    """Return row-wise cross products of (..., 3) arrays (numpy's cross is slow for small ones)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
 def _rotations(angles, axis):
     """Return elementary rotation matrices (n, 3, 3) about a fixed axis index."""
     c, s = np.cos(angles), np.sin(angles)
@@ -68,7 +75,7 @@ class Loads:
         self.w = lever[:, None] * self.rotations[:, :, 0]
         self.V = np.cumsum(self.v[::-1], axis=0)[::-1]
         self.W = np.cumsum(self.w[::-1], axis=0)[::-1]
-        self.T = np.cross(self.V, self.field) + np.cross(self.W, self.gravity)
+        self.T = cross(self.V, self.field) + cross(self.W, self.gravity)
 
 
 def energy(chain, q, loads):
@@ -92,13 +99,13 @@ def hessian(chain, q, loads):
     B, g = loads.field, loads.gravity
     dots = a @ a.T                                   # (a_e . a_f)
     # -(a_f x a_e) . T_e = -(a_e x T_e) . a_f; it vanishes by itself on the diagonal.
-    h = (-np.cross(a, T) @ a.T
+    h = (-cross(a, T) @ a.T
          - np.outer(np.sum(a * V, axis=1), a @ B) + dots * (V @ B)[:, None]
          - np.outer(np.sum(a * W, axis=1), a @ g) + dots * (W @ g)[:, None])
-    lower = np.tril(h)
-    full = lower + np.tril(lower, -1).T
-    full[np.diag_indices(3 * n)] += chain.stiffness_n_m.reshape(-1)
-    return full
+    upper = np.triu_indices(3 * n, 1)
+    h[upper] = h.T[upper]  # the formula holds for f <= e: mirror the lower triangle
+    h[np.diag_indices(3 * n)] += chain.stiffness_n_m.reshape(-1)
+    return h
 
 
 def points(chain, rotations):

@@ -103,7 +103,7 @@ class _Spatial:
         self.chain = chain
         self.field, self.gravity = field_t, gravity_m_s2
         self.size = 3 * chain.size
-        self._cache = (None, None)
+        self._cache = self._hessian_cache = (None, None)
 
     def loads(self, x):
         key, value = self._cache
@@ -125,22 +125,30 @@ class _Spatial:
                    1e-9 * np.max(self.chain.stiffness_n_m), 1e-300)
 
     def hessian(self, x):
-        return spatial.hessian(self.chain, x.reshape(-1, 3), self.loads(x))
+        key, value = self._hessian_cache
+        if key is None or not np.array_equal(key, x):
+            value = spatial.hessian(self.chain, x.reshape(-1, 3), self.loads(x))
+            self._hessian_cache = (x.copy(), value)
+        return value
 
     def newton_step(self, x, g):
         h = self.hessian(x)
-        eye = np.eye(len(g))
-        return _shifted_solve(lambda shift: cho_solve(cho_factor(h + shift * eye), g),
-                              np.diag(h), g)
+        try:
+            return -cho_solve(cho_factor(h, check_finite=False), g, check_finite=False)
+        except LinAlgError:
+            # Indefinite (an obtuse magnet, a saddle nearby): shift just past the most
+            # negative eigenvalue rather than searching for a shift that factorises.
+            lowest = eigh(h, eigvals_only=True, subset_by_index=[0, 0], check_finite=False)[0]
+            shift = -lowest + 1e-6 * max(np.max(np.abs(np.diag(h))), 1e-300)
+            return -np.linalg.solve(h + shift * np.eye(len(g)), g)
 
     def smallest_eigen(self, x):
         h = self.hessian(x)
-        values, vectors = eigh(h, subset_by_index=[0, 0])
+        values, vectors = eigh(h, subset_by_index=[0, 0], check_finite=False)
         return float(values[0]), vectors[:, 0], np.max(np.abs(np.diag(h)))
 
     def result(self, x):
-        rotations, _ = spatial.kinematics(self.chain, x.reshape(-1, 3))
-        return x.reshape(-1, 3), spatial.points(self.chain, rotations)
+        return x.reshape(-1, 3), spatial.points(self.chain, self.loads(x).rotations)
 
 
 def _shifted_solve(solve_with_shift, diagonal, g):
@@ -156,14 +164,14 @@ def _shifted_solve(solve_with_shift, diagonal, g):
 
 
 def _minimise(problem, x, tol, max_iterations, time_limit_s):
-    """Return (x, reason, iterations, residual) of a damped Newton minimisation."""
+    """Return (x, reason, iterations, residual, stability or None) of a damped Newton."""
     deadline = time.monotonic() + time_limit_s
     iterations = escapes = 0
     while True:
         g = problem.gradient(x)
         residual = float(np.max(np.abs(g)) / problem.torque_scale(x))
         if not np.isfinite(residual):
-            return x, 'non-finite gradient', iterations, residual
+            return x, 'non-finite gradient', iterations, residual, None
         if residual <= tol:
             value, mode, diag_scale = problem.smallest_eigen(x)
             if value < -1e-9 * diag_scale and escapes < MAX_SADDLE_ESCAPES:
@@ -172,12 +180,13 @@ def _minimise(problem, x, tol, max_iterations, time_limit_s):
                     np.abs(mode))
                 continue
             return x, 'converged' + (f' after leaving {escapes} saddle(s)' if escapes
-                                     else ''), iterations, residual
+                                     else ''), iterations, residual, value
         if iterations >= max_iterations:
-            return x, f'no convergence in {max_iterations} iterations', iterations, residual
+            return x, f'no convergence in {max_iterations} iterations', iterations, \
+                residual, None
         if time.monotonic() > deadline:
             return x, f'no convergence within the {time_limit_s:g} s limit', iterations, \
-                residual
+                residual, None
         iterations += 1
         step = problem.newton_step(x, g)
         biggest = np.max(np.abs(step))
@@ -196,8 +205,9 @@ def _minimise(problem, x, tol, max_iterations, time_limit_s):
             alpha *= 0.5
         else:
             if residual <= 1e3 * tol:
-                return x, 'converged (at round-off)', iterations, residual
-            return x, f'line search failed (residual {residual:.3g})', iterations, residual
+                return x, 'converged (at round-off)', iterations, residual, None
+            return x, f'line search failed (residual {residual:.3g})', iterations, \
+                residual, None
         x = trial
 
 
@@ -233,12 +243,13 @@ def solve(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=1, initial=None, tol
     x = np.zeros(shape) if initial is None else np.array(initial, dtype=float)
     if x.shape != shape or not np.all(np.isfinite(x)):
         raise ValueError(f'initial angles must be finite numbers of shape {shape}')
-    x, reason, iterations, residual = _minimise(problem, x.reshape(-1), tol, max_iterations,
-                                                time_limit_s)
+    x, reason, iterations, residual, stability = _minimise(problem, x.reshape(-1), tol,
+                                                           max_iterations, time_limit_s)
     if not np.all(np.isfinite(x)):
         return Equilibrium(np.full(shape, np.nan), np.full((n + 1, 3), np.nan), False,
                            reason, iterations, residual, np.nan, np.nan)
-    stability = problem.smallest_eigen(x)[0]
+    if stability is None:
+        stability = problem.smallest_eigen(x)[0]
     angles, points = problem.result(x)
     return Equilibrium(angles, points, reason.startswith('converged'), reason, iterations,
                        residual, stability, float(problem.energy(x)))

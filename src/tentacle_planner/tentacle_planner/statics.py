@@ -237,7 +237,7 @@ def solve(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=1, initial=None, tol
     if n == 0:
         return Equilibrium(np.zeros((0,) if dof == 1 else (0, 3)),
                            chain.base_position_m[None, :].copy(), True, 'nothing inserted',
-                           0, 0.0, np.nan, 0.0)
+                           0, 0.0, np.inf, 0.0)  # no degree of freedom: vacuously stable
     problem = (_Planar if dof == 1 else _Spatial)(chain, field_t, gravity_m_s2)
     shape = (n,) if dof == 1 else (n, 3)
     x = np.zeros(shape) if initial is None else np.array(initial, dtype=float)

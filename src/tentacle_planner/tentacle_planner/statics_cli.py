@@ -51,7 +51,8 @@ def main(args=None):
             chain.lengths_m.sum()), 'links': chain.size, 'dof': opts.dof,
         'tip': eq.tip_m.tolist(), 'heading': eq.heading.tolist(),
         'converged': eq.converged, 'reason': eq.reason, 'iterations': eq.iterations,
-        'residual': eq.residual, 'stability': None if np.isnan(eq.stability) else eq.stability,
+        'residual': eq.residual,
+        'stability': eq.stability if np.isfinite(eq.stability) else None,
         'energy_j': eq.energy_j, 'points': eq.points_m.tolist()}
     if opts.json:
         print(json.dumps(result))

@@ -212,6 +212,10 @@ class BankClient:
                 self._stopped = {'safe': False, 'error': 'exited unexpectedly'}
                 self._state['status'] = ['error', 'coil bank process exited unexpectedly: '
                                                   'restart coils_node']
+                self._state['measured_a'] = [math.nan] * 3
+                self._state['channels'] = [
+                    {**snap, 'connected': False, 'last_error': 'coil bank process exited'}
+                    for snap in self._state['channels']]
             self._cond.notify_all()
 
     # -- what the node asks -----------------------------------------------------------------

@@ -68,3 +68,14 @@ def test_bad_configuration_is_reported():
     with pytest.raises(CoilsError, match='ports needs 3 entries'):
         BankClient(ports=['/dev/null'], dialect='dxkdp', baud=9600, max_current_a=1.0,
                    slew_rate_a_per_s=1.0, watchdog_s=1.0)
+
+
+def test_a_crashed_bank_is_reported_not_hidden(client, wait_for):
+    bank, emus, _ = client
+    bank.popen.kill()
+    assert wait_for(lambda: bank.status()[0] == 'error')
+    assert 'exited unexpectedly' in bank.status()[1]
+    assert not bank.connected()
+    assert all(not snap['connected'] for snap in bank.snapshots())
+    with pytest.raises(CommandRejected, match='not running'):
+        bank.command([1.0, 0.0, 0.0])

@@ -76,3 +76,30 @@ def points(chain, theta):
     steps = chain.lengths_m[:, None] * np.column_stack([np.cos(theta), np.sin(theta)])
     planar = np.vstack([np.zeros(2), np.cumsum(steps, axis=0)])
     return chain.base_position_m + planar @ chain.base_rotation[:, :2].T
+
+
+# -- linearised small-angle model: sin t ~ t, cos t ~ 1 - t^2 / 2 in loads and kinematics ----
+def energy_linear(theta, k, a, b):
+    """Return the small-angle energy, J (quadratic in theta)."""
+    dq = np.diff(theta, prepend=0.0)
+    return 0.5 * np.dot(k, dq * dq) - np.dot(a, 1.0 - 0.5 * theta * theta) - np.dot(b, theta)
+
+
+def gradient_linear(theta, k, a, b):
+    """Return the small-angle dU/dtheta (n,), N m."""
+    torque = k * np.diff(theta, prepend=0.0)
+    g = torque.copy()
+    g[:-1] -= torque[1:]
+    return g + a * theta - b
+
+
+def hessian_banded_linear(theta, k, a, b):
+    """Return the (constant) small-angle Hessian in upper banded form (2, n)."""
+    return hessian_banded(np.zeros_like(theta), k, a, np.zeros_like(b))
+
+
+def points_linear(chain, theta):
+    """Return small-angle joint positions and tip, (n + 1, 3): x = sum h, y = sum h theta."""
+    steps = chain.lengths_m[:, None] * np.column_stack([np.ones_like(theta), theta])
+    planar = np.vstack([np.zeros(2), np.cumsum(steps, axis=0)])
+    return chain.base_position_m + planar @ chain.base_rotation[:, :2].T

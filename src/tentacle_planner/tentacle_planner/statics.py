@@ -56,27 +56,34 @@ class Equilibrium:
 
 
 class _Planar:
-    """Planar chain: x = absolute link angles (n,)."""
+    """Planar chain: x = absolute link angles (n,); linear: small-angle model."""
 
-    def __init__(self, chain, field_t, gravity_m_s2):
+    def __init__(self, chain, field_t, gravity_m_s2, linear=False):
         self.chain = chain
+        self.linear = linear
+        if linear:
+            self._energy, self._gradient = planar.energy_linear, planar.gradient_linear
+            self._hessian, self._points = planar.hessian_banded_linear, planar.points_linear
+        else:
+            self._energy, self._gradient = planar.energy, planar.gradient
+            self._hessian, self._points = planar.hessian_banded, planar.points
         self.k = chain.stiffness_n_m[:, 0]
         self.a, self.b = planar.loads(chain, field_t, gravity_m_s2)
         self.load_scale = np.max(np.abs(self.a) + np.abs(self.b))
         self.size = chain.size
 
     def energy(self, x):
-        return planar.energy(x, self.k, self.a, self.b)
+        return self._energy(x, self.k, self.a, self.b)
 
     def gradient(self, x):
-        return planar.gradient(x, self.k, self.a, self.b)
+        return self._gradient(x, self.k, self.a, self.b)
 
     def torque_scale(self, x):
         return max(self.load_scale, np.max(np.abs(self.k * np.diff(x, prepend=0.0))),
                    1e-9 * np.max(self.k), 1e-300)
 
     def newton_step(self, x, g):
-        banded = planar.hessian_banded(x, self.k, self.a, self.b)
+        banded = self._hessian(x, self.k, self.a, self.b)
         if self.size == 1:  # LAPACK's banded solver needs two
             curvature = banded[1, 0]
             scale = max(abs(curvature), 1e-300)
@@ -85,7 +92,7 @@ class _Planar:
             banded + np.array([[0.0], [shift]]), g, check_finite=False), banded[1], g)
 
     def smallest_eigen(self, x):
-        banded = planar.hessian_banded(x, self.k, self.a, self.b)
+        banded = self._hessian(x, self.k, self.a, self.b)
         if self.size == 1:
             return float(banded[1, 0]), np.ones(1), abs(banded[1, 0])
         values, vectors = eigh_tridiagonal(banded[1], banded[0, 1:], select='i',
@@ -93,11 +100,13 @@ class _Planar:
         return float(values[0]), vectors[:, 0], np.max(np.abs(banded[1]))
 
     def result(self, x):
-        return x, planar.points(self.chain, x)
+        return x, self._points(self.chain, x)
 
 
 class _Spatial:
     """3-DoF chain: x = joint angles flattened (3n,)."""
+
+    linear = False
 
     def __init__(self, chain, field_t, gravity_m_s2):
         self.chain = chain
@@ -174,7 +183,8 @@ def _minimise(problem, x, tol, max_iterations, time_limit_s):
             return x, 'non-finite gradient', iterations, residual, None
         if residual <= tol:
             value, mode, diag_scale = problem.smallest_eigen(x)
-            if value < -1e-9 * diag_scale and escapes < MAX_SADDLE_ESCAPES:
+            if (value < -1e-9 * diag_scale and escapes < MAX_SADDLE_ESCAPES
+                    and not problem.linear):
                 escapes += 1
                 x = x + ESCAPE_STEP_RAD * np.sign(mode.sum() or 1.0) * mode / np.max(
                     np.abs(mode))
@@ -190,7 +200,7 @@ def _minimise(problem, x, tol, max_iterations, time_limit_s):
         iterations += 1
         step = problem.newton_step(x, g)
         biggest = np.max(np.abs(step))
-        if biggest > MAX_STEP_RAD:
+        if biggest > MAX_STEP_RAD and not problem.linear:  # a quadratic needs no cap
             step *= MAX_STEP_RAD / biggest
         u0, slope = problem.energy(x), float(g @ step)
         alpha = 1.0
@@ -212,7 +222,7 @@ def _minimise(problem, x, tol, max_iterations, time_limit_s):
 
 
 def solve(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=1, initial=None, tol=1e-9,
-          max_iterations=500, time_limit_s=10.0):
+          max_iterations=500, time_limit_s=10.0, linear=False):
     """
     Return the Equilibrium of a chain.
 
@@ -223,7 +233,10 @@ def solve(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=1, initial=None, tol
     :param initial: the previous state to start from: (n,) link angles for dof 1, (n, 3)
         joint angles for dof 3, rad
     :param tol: converged when max |dU/dq| <= tol * the largest torque in the balance
-    :raises ValueError: non-finite field or gravity, an initial state of the wrong shape
+    :param linear: small-angle model (planar only): one linear solve; no minimum exists when
+        a magnet is at an obtuse angle to the field, and the result says so
+    :raises ValueError: non-finite field or gravity, an initial state of the wrong shape,
+        linear with 3-DoF joints
     """
     n = chain.size
     if dof not in (1, 3):
@@ -238,7 +251,10 @@ def solve(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=1, initial=None, tol
         return Equilibrium(np.zeros((0,) if dof == 1 else (0, 3)),
                            chain.base_position_m[None, :].copy(), True, 'nothing inserted',
                            0, 0.0, np.inf, 0.0)  # no degree of freedom: vacuously stable
-    problem = (_Planar if dof == 1 else _Spatial)(chain, field_t, gravity_m_s2)
+    if linear and dof != 1:
+        raise ValueError('the linearised model is planar only (dof 1)')
+    problem = _Planar(chain, field_t, gravity_m_s2, linear) if dof == 1 else _Spatial(
+        chain, field_t, gravity_m_s2)
     shape = (n,) if dof == 1 else (n, 3)
     x = np.zeros(shape) if initial is None else np.array(initial, dtype=float)
     if x.shape != shape or not np.all(np.isfinite(x)):
@@ -250,6 +266,8 @@ def solve(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=1, initial=None, tol
                            reason, iterations, residual, np.nan, np.nan)
     if stability is None:
         stability = problem.smallest_eigen(x)[0]
+    if linear and stability <= 0:
+        reason = 'linearised model has no minimum (Hessian not positive definite)'
     angles, points = problem.result(x)
     return Equilibrium(angles, points, reason.startswith('converged'), reason, iterations,
                        residual, stability, float(problem.energy(x)))

@@ -32,6 +32,8 @@ def build_parser():
                         help='joint degrees of freedom: 1 planar, 3 bend-bend-twist')
     parser.add_argument('--gravity', nargs=3, type=float, default=(0.0, 0.0, 0.0),
                         metavar=('GX', 'GY', 'GZ'), help='gravity, m/s^2 (default none)')
+    parser.add_argument('--linear', action='store_true',
+                        help='small-angle (linearised) model, planar only: one linear solve')
     parser.add_argument('--json', action='store_true', help='print one JSON object')
     return parser
 
@@ -42,7 +44,7 @@ def main(args=None):
     try:
         spec = load_tentacle(opts.tentacle)
         chain = discretise(spec, opts.inserted, opts.sublinks)
-        eq = solve(chain, opts.field, opts.gravity, dof=opts.dof)
+        eq = solve(chain, opts.field, opts.gravity, dof=opts.dof, linear=opts.linear)
     except (SpecError, ValueError) as exc:
         print(f'tentacle-statics: {exc}', file=sys.stderr)
         return 2

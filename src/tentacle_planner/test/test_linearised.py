@@ -1,0 +1,51 @@
+"""The small-angle (linearised) model: exact beam theory, and where it stops being valid."""
+
+import numpy as np
+import pytest
+from tentacle_planner import planar
+from tentacle_planner.chain import discretise
+from tentacle_planner.statics import solve
+
+
+def closed_form_tip_deflection(length, ei, ma, b_t):
+    """Cantilever under a uniform distributed moment M A B: delta = M A B L^3 / (3 E I)."""
+    return ma * b_t * length ** 3 / (3 * ei)
+
+
+def test_linear_model_is_beam_theory_at_any_load(cantilever):
+    spec, length, ei, ma = cantilever
+    chain = discretise(spec, sublinks=200)
+    for b_t in (1e-4, 5e-3):  # beta 0.14 and 6.8
+        eq = solve(chain, [0.0, b_t, 0.0], linear=True)
+        assert eq.converged and eq.iterations <= 2
+        assert eq.tip_m[1] == pytest.approx(closed_form_tip_deflection(length, ei, ma, b_t),
+                                            rel=1e-4)
+
+
+def test_linear_agrees_with_nonlinear_at_small_load_only(cantilever):
+    spec = cantilever[0]
+    chain = discretise(spec, sublinks=40)
+    small, large = [0.0, 2e-5, 0.0], [0.0, 5e-3, 0.0]
+    assert solve(chain, small, linear=True).tip_m[1] == pytest.approx(
+        solve(chain, small).tip_m[1], rel=1e-3)
+    assert solve(chain, large, linear=True).tip_m[1] > 1.5 * solve(chain, large).tip_m[1]
+
+
+def test_obtuse_field_has_no_linear_minimum(cantilever):
+    chain = discretise(cantilever[0], sublinks=20)
+    eq = solve(chain, [-5e-3, 1e-4, 0.0], linear=True)
+    assert not eq.converged and 'no minimum' in eq.reason and eq.stability < 0
+    with pytest.raises(ValueError, match='planar only'):
+        solve(chain, [0, 1e-3, 0], dof=3, linear=True)
+
+
+def test_linear_gradient_matches_finite_differences(cantilever):
+    chain = discretise(cantilever[0], sublinks=6)
+    a, b = planar.loads(chain, [0.002, 0.004, 0.0], [0.0, -9.81, 0.0])
+    k = chain.stiffness_n_m[:, 0]
+    theta = np.linspace(-0.3, 0.4, 6)
+    eps = 1e-6
+    fd = [(planar.energy_linear(theta + eps * e, k, a, b)
+           - planar.energy_linear(theta - eps * e, k, a, b)) / (2 * eps) for e in np.eye(6)]
+    np.testing.assert_allclose(planar.gradient_linear(theta, k, a, b), fd, rtol=1e-6,
+                               atol=1e-12)

@@ -30,33 +30,43 @@ def cross(a, b):
     return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
-def _rotations(angles, axis):
-    """Return elementary rotation matrices (n, 3, 3) about a fixed axis index."""
-    c, s = np.cos(angles), np.sin(angles)
-    r = np.zeros((len(angles), 3, 3))
-    i, j = [(1, 2), (2, 0), (0, 1)][axis]  # the plane each rotation turns
-    r[:, axis, axis] = 1.0
-    r[:, i, i] = c
-    r[:, j, j] = c
-    r[:, j, i] = s
-    r[:, i, j] = -s
-    return r
+def _local_rotations(q):
+    """Return Rz(q0) Ry(q1) Rx(q2) for every joint (n, 3, 3), and Rz(q0) Ry(q1) e_x (n, 3).
+
+    Written out (ZYX Euler angles) so a whole chain costs a few vector operations.
+    """
+    c0, s0 = np.cos(q[:, 0]), np.sin(q[:, 0])
+    c1, s1 = np.cos(q[:, 1]), np.sin(q[:, 1])
+    c2, s2 = np.cos(q[:, 2]), np.sin(q[:, 2])
+    r = np.empty((len(q), 3, 3))
+    r[:, 0, 0] = c0 * c1
+    r[:, 0, 1] = c0 * s1 * s2 - s0 * c2
+    r[:, 0, 2] = c0 * s1 * c2 + s0 * s2
+    r[:, 1, 0] = s0 * c1
+    r[:, 1, 1] = s0 * s1 * s2 + c0 * c2
+    r[:, 1, 2] = s0 * s1 * c2 - c0 * s2
+    r[:, 2, 0] = -s1
+    r[:, 2, 1] = c1 * s2
+    r[:, 2, 2] = c1 * c2
+    return r, np.column_stack([-s0, c0, np.zeros_like(c0)])
 
 
 def kinematics(chain, q):
-    """Return (link rotations (n, 3, 3), joint axes in the world (n, 3, 3): [joint, axis])."""
-    n = chain.size
-    rz, ry, rx = _rotations(q[:, 0], 2), _rotations(q[:, 1], 1), _rotations(q[:, 2], 0)
-    rotations = np.empty((n, 3, 3))
-    axes = np.empty((n, 3, 3))
+    """Return (link rotations (n, 3, 3), joint axes in the world (n, 3, 3): [joint, axis]).
+
+    Axis 0 is the parent's z; axis 1 the parent's y turned by the first bend; axis 2 the
+    link's own x.
+    """
+    local, y_after_bend = _local_rotations(q)
+    rotations = np.empty_like(local)
     parent = chain.base_rotation
-    for j in range(n):
-        axes[j, 0] = parent[:, 2]
-        after_z = parent @ rz[j]
-        axes[j, 1] = after_z[:, 1]
-        after_y = after_z @ ry[j]
-        axes[j, 2] = after_y[:, 0]
-        parent = rotations[j] = after_y @ rx[j]
+    for j in range(len(q)):
+        parent = rotations[j] = parent @ local[j]
+    parents = np.concatenate([chain.base_rotation[None], rotations[:-1]])
+    axes = np.empty_like(local)
+    axes[:, 0] = parents[:, :, 2]
+    axes[:, 1] = np.einsum('nij,nj->ni', parents, y_after_bend)
+    axes[:, 2] = rotations[:, :, 0]
     return rotations, axes
 
 
@@ -75,7 +85,10 @@ class Loads:
         self.w = lever[:, None] * self.rotations[:, :, 0]
         self.V = np.cumsum(self.v[::-1], axis=0)[::-1]
         self.W = np.cumsum(self.w[::-1], axis=0)[::-1]
-        self.T = cross(self.V, self.field) + cross(self.W, self.gravity)
+        self.has_gravity = bool(np.any(self.gravity))
+        self.T = cross(self.V, self.field)
+        if self.has_gravity:
+            self.T += cross(self.W, self.gravity)
 
 
 def energy(chain, q, loads):
@@ -92,20 +105,32 @@ def gradient(chain, q, loads):
 
 def hessian(chain, q, loads):
     """Return the Hessian (3n, 3n) in the flattened order (joint, then bend_1, bend_2, twist)."""
-    n = chain.size
-    a = loads.axes.reshape(3 * n, 3)
-    joint = np.repeat(np.arange(n), 3)
-    V, W, T = loads.V[joint], loads.W[joint], loads.T[joint]
-    B, g = loads.field, loads.gravity
+    size = 3 * chain.size
+    a = loads.axes.reshape(size, 3)
+    joint = np.repeat(np.arange(chain.size), 3)
+    V, T = loads.V[joint], loads.T[joint]
+    B = loads.field
     dots = a @ a.T                                   # (a_e . a_f)
     # -(a_f x a_e) . T_e = -(a_e x T_e) . a_f; it vanishes by itself on the diagonal.
-    h = (-cross(a, T) @ a.T
-         - np.outer(np.sum(a * V, axis=1), a @ B) + dots * (V @ B)[:, None]
-         - np.outer(np.sum(a * W, axis=1), a @ g) + dots * (W @ g)[:, None])
-    upper = np.triu_indices(3 * n, 1)
+    h = -(cross(a, T) @ a.T) - np.outer(np.einsum('ij,ij->i', a, V), a @ B) \
+        + dots * (V @ B)[:, None]
+    if loads.has_gravity:
+        W, g = loads.W[joint], loads.gravity
+        h += dots * (W @ g)[:, None] - np.outer(np.einsum('ij,ij->i', a, W), a @ g)
+    upper = _upper_indices(size)
     h[upper] = h.T[upper]  # the formula holds for f <= e: mirror the lower triangle
-    h[np.diag_indices(3 * n)] += chain.stiffness_n_m.reshape(-1)
+    h.flat[::size + 1] += chain.stiffness_n_m.reshape(-1)
     return h
+
+
+_UPPER = {}
+
+
+def _upper_indices(size):
+    """Return (and remember) the strict upper-triangle indices of a size x size matrix."""
+    if size not in _UPPER:
+        _UPPER[size] = np.triu_indices(size, 1)
+    return _UPPER[size]
 
 
 def points(chain, rotations):

@@ -31,7 +31,8 @@ def cross(a, b):
 
 
 def _local_rotations(q):
-    """Return Rz(q0) Ry(q1) Rx(q2) for every joint (n, 3, 3), and Rz(q0) Ry(q1) e_x (n, 3).
+    """
+    Return Rz(q0) Ry(q1) Rx(q2) for every joint (n, 3, 3), and Rz(q0) Ry(q1) e_x (n, 3).
 
     Written out (ZYX Euler angles) so a whole chain costs a few vector operations.
     """
@@ -52,7 +53,8 @@ def _local_rotations(q):
 
 
 def kinematics(chain, q):
-    """Return (link rotations (n, 3, 3), joint axes in the world (n, 3, 3): [joint, axis]).
+    """
+    Return (link rotations (n, 3, 3), joint axes in the world (n, 3, 3): [joint, axis]).
 
     Axis 0 is the parent's z; axis 1 the parent's y turned by the first bend; axis 2 the
     link's own x.

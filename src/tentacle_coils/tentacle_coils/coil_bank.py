@@ -244,6 +244,7 @@ class CoilBank:
         self._lock = threading.Lock()
         self._enabled = False
         self._estop = False
+        self._was_enabled = False  # outputs on when the estop came: restored on release
         self._fault = ''
         self._stopping = ''   # reason of a safe stop in progress (ramp, then outputs off)
         self._watchdog_tripped = False
@@ -366,7 +367,7 @@ class CoilBank:
                 self._was_enabled = self._enabled
                 self._begin_stop('estop')
                 return
-        if getattr(self, '_was_enabled', False):
+        if self._was_enabled:
             self.enable(True)
 
     def _begin_stop(self, reason):

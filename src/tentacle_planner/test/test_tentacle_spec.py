@@ -1,9 +1,12 @@
 """Tentacle files: the shipped ones load, bad ones are refused naming file and field."""
 
 import math
+import pathlib
 
 import numpy as np
 import pytest
+from tentacle_planner.chain import discretise
+from tentacle_planner.statics import solve
 from tentacle_planner.tentacle_spec import load_tentacle, MU0, parse_tentacle, SpecError
 import yaml
 
@@ -68,3 +71,11 @@ def test_file_errors_name_the_file(tmp_path):
     bad.write_text('segments: [length_m: 1, {')
     with pytest.raises(SpecError, match='bad.yaml: not valid YAML'):
         load_tentacle(bad)
+
+
+@pytest.mark.parametrize('name', ['cantilever', 'vsr_chapter6', 'braided_chapter5'])
+def test_shipped_tentacles_load_and_solve(name):
+    path = pathlib.Path(__file__).resolve().parents[3] / f'config/tentacles/{name}.yaml'
+    spec = load_tentacle(path)
+    eq = solve(discretise(spec, sublinks=2), [0.0, 0.01, 0.0], dof=3)
+    assert eq.converged, eq.reason

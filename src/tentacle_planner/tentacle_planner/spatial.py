@@ -72,32 +72,41 @@ def kinematics(chain, q):
     return rotations, axes
 
 
+def gravity_levers(chain):
+    """Return W_i h_i (n,), kg m: (mass distal of link i + half its own) times its length."""
+    masses = chain.masses_kg
+    distal_mass = np.cumsum(masses[::-1])[::-1] - masses
+    return (distal_mass + masses / 2) * chain.lengths_m
+
+
 class Loads:
     """What the loads contribute at one configuration: moments, levers and distal sums."""
 
-    def __init__(self, chain, q, field_t, gravity_m_s2):
-        """Compute frames, world moments v_i, gravity levers w_i and their distal sums."""
+    def __init__(self, chain, q, field_t, gravity_m_s2, levers=None):
+        """Compute frames, world moments v_i, gravity levers w_i and their distal sums.
+
+        :param levers: gravity_levers(chain), if the caller already has them
+        """
         self.field = np.asarray(field_t, dtype=float)
         self.gravity = np.asarray(gravity_m_s2, dtype=float)
         self.rotations, self.axes = kinematics(chain, q)
-        masses = chain.masses_kg
-        distal_mass = np.cumsum(masses[::-1])[::-1] - masses
-        lever = (distal_mass + masses / 2) * chain.lengths_m
-        self.v = np.einsum('nij,nj->ni', self.rotations, chain.moments_a_m2)
-        self.w = lever[:, None] * self.rotations[:, :, 0]
+        self.v = (self.rotations @ chain.moments_a_m2[:, :, None])[:, :, 0]
         self.V = np.cumsum(self.v[::-1], axis=0)[::-1]
-        self.W = np.cumsum(self.w[::-1], axis=0)[::-1]
-        self.has_gravity = bool(np.any(self.gravity))
         self.T = cross(self.V, self.field)
+        self.has_gravity = bool(self.gravity.any())
         if self.has_gravity:
+            levers = gravity_levers(chain) if levers is None else levers
+            self.w = levers[:, None] * self.rotations[:, :, 0]
+            self.W = np.cumsum(self.w[::-1], axis=0)[::-1]
             self.T += cross(self.W, self.gravity)
 
 
 def energy(chain, q, loads):
     """Return the total potential energy, J."""
-    k = chain.stiffness_n_m
-    return 0.5 * np.sum(k * q * q) - np.sum(loads.v @ loads.field) - np.sum(
-        loads.w @ loads.gravity)
+    u = 0.5 * float(np.sum(chain.stiffness_n_m * q * q)) - float(np.sum(loads.v @ loads.field))
+    if loads.has_gravity:
+        u -= float(np.sum(loads.w @ loads.gravity))
+    return u
 
 
 def gradient(chain, q, loads):

@@ -18,8 +18,7 @@ from dataclasses import dataclass
 import time
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve, eigh, eigh_tridiagonal, LinAlgError, \
-    solveh_banded
+from scipy.linalg import eigh, eigh_tridiagonal, LinAlgError, solveh_banded
 
 from tentacle_planner import planar, spatial
 
@@ -111,13 +110,15 @@ class _Spatial:
     def __init__(self, chain, field_t, gravity_m_s2):
         self.chain = chain
         self.field, self.gravity = field_t, gravity_m_s2
+        self.levers = spatial.gravity_levers(chain)
         self.size = 3 * chain.size
         self._cache = self._hessian_cache = (None, None)
 
     def loads(self, x):
         key, value = self._cache
         if key is None or not np.array_equal(key, x):
-            value = spatial.Loads(self.chain, x.reshape(-1, 3), self.field, self.gravity)
+            value = spatial.Loads(self.chain, x.reshape(-1, 3), self.field, self.gravity,
+                                  self.levers)
             self._cache = (x.copy(), value)
         return value
 
@@ -143,8 +144,9 @@ class _Spatial:
     def newton_step(self, x, g):
         h = self.hessian(x)
         try:
-            return -cho_solve(cho_factor(h, check_finite=False), g, check_finite=False)
-        except LinAlgError:
+            np.linalg.cholesky(h)  # positive definite: the plain Newton step
+            return -np.linalg.solve(h, g)
+        except np.linalg.LinAlgError:
             # Indefinite (an obtuse magnet, a saddle nearby): shift just past the most
             # negative eigenvalue rather than searching for a shift that factorises.
             lowest = eigh(h, eigvals_only=True, subset_by_index=[0, 0], check_finite=False)[0]
@@ -153,7 +155,7 @@ class _Spatial:
 
     def smallest_eigen(self, x):
         h = self.hessian(x)
-        values, vectors = eigh(h, subset_by_index=[0, 0], check_finite=False)
+        values, vectors = np.linalg.eigh(h)
         return float(values[0]), vectors[:, 0], np.max(np.abs(np.diag(h)))
 
     def result(self, x):

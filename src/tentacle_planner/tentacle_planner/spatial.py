@@ -83,7 +83,8 @@ class Loads:
     """What the loads contribute at one configuration: moments, levers and distal sums."""
 
     def __init__(self, chain, q, field_t, gravity_m_s2, levers=None):
-        """Compute frames, world moments v_i, gravity levers w_i and their distal sums.
+        """
+        Compute frames, world moments v_i, gravity levers w_i and their distal sums.
 
         :param levers: gravity_levers(chain), if the caller already has them
         """

@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: venv demo test test-fast lint build bench clean
+.PHONY: venv demo test test-fast lint build bench bench-model clean
 
 venv: $(STAMP)
 
@@ -32,6 +32,17 @@ build: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) bench/coils_rate.py
+
+# The statics speed/accuracy trade against the PyElastica peer, in a bench-only venv.
+VENV_BENCH := .venv-bench
+$(VENV_BENCH)/.installed: bench/requirements-peer.txt
+	$(PYTHON) -m venv $(VENV_BENCH)
+	$(VENV_BENCH)/bin/python -m pip install --quiet -r bench/requirements-peer.txt
+	$(VENV_BENCH)/bin/python -m pip install --quiet --no-deps --ignore-requires-python magneto-pyelastica==0.0.1.post2
+	touch $@
+
+bench-model: $(VENV_BENCH)/.installed
+	$(VENV_BENCH)/bin/python bench/model_tradeoff.py
 
 clean:
 	rm -rf ros_ws/build ros_ws/install ros_ws/log

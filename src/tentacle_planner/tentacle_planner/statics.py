@@ -261,6 +261,14 @@ def solve(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=1, initial=None, tol
     x = np.zeros(shape) if initial is None else np.array(initial, dtype=float)
     if x.shape != shape or not np.all(np.isfinite(x)):
         raise ValueError(f'initial angles must be finite numbers of shape {shape}')
+    if linear:
+        # The small-angle energy is quadratic: without a positive definite Hessian it has
+        # no minimum at all, and descending it would run off to infinity.
+        lowest = problem.smallest_eigen(x)[0]
+        if lowest <= 0:
+            return Equilibrium(np.full(shape, np.nan), np.full((n + 1, 3), np.nan), False,
+                               'linearised model has no minimum (Hessian not positive '
+                               'definite)', 0, np.nan, lowest, np.nan)
     x, reason, iterations, residual, stability = _minimise(problem, x.reshape(-1), tol,
                                                            max_iterations, time_limit_s)
     if not np.all(np.isfinite(x)):
@@ -268,8 +276,6 @@ def solve(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=1, initial=None, tol
                            reason, iterations, residual, np.nan, np.nan)
     if stability is None:
         stability = problem.smallest_eigen(x)[0]
-    if linear and stability <= 0:
-        reason = 'linearised model has no minimum (Hessian not positive definite)'
     angles, points = problem.result(x)
     return Equilibrium(angles, points, reason.startswith('converged'), reason, iterations,
                        residual, stability, float(problem.energy(x)))

@@ -1,0 +1,202 @@
+#!/usr/bin/env python3
+"""
+Benchmark: the statics model's speed against its accuracy, and against a Cosserat-rod peer.
+
+For standard scenes (the validation cantilever at 90, 135 and 180 degrees to a 5 mT field;
+the chapter 5 braided tentacle fully inserted in an out-of-plane field; the chapter 6 strip
+discretised into 48 links) it solves at every fidelity setting (linearised planar, planar,
+3-DoF; 1 to 64 sub-links per segment) and prints the time per forward solve (median, cold
+start and warm start from a nearby state) beside the tip error against a converged
+reference of the same scene, then writes bench/out/model_tradeoff.png (error against time:
+the Pareto front). The peer, PyElastica with magneto-pyelastica, relaxes the 90 degree
+cantilever with damping; its wall time to come within 1% of L is set beside ours at the
+same accuracy, measured in the same run.
+
+Run: make bench-model (creates the bench-only .venv-bench with the peer).
+"""
+
+import argparse
+import json
+import os
+import pathlib
+import sys
+import time
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+sys.path[:0] = [str(ROOT / 'src' / 'tentacle_planner'), str(ROOT / 'bench')]
+
+import numpy as np  # noqa: E402
+from tentacle_planner.chain import discretise  # noqa: E402
+from tentacle_planner.statics import solve  # noqa: E402
+from tentacle_planner.tentacle_spec import load_tentacle  # noqa: E402
+
+TENTACLES = ROOT / 'config' / 'tentacles'
+SUBLINKS = (1, 2, 4, 8, 16, 32, 64)
+
+
+def field(magnitude_t, degrees):
+    """Return the in-plane field vector (3,), tesla, at an angle to +x in degrees."""
+    phi = np.radians(degrees)
+    return magnitude_t * np.array([np.cos(phi), np.sin(phi), 0.0])
+
+
+SCENES = {  # name: (tentacle file, field in tesla, models to try, reference setting)
+    'cantilever 90': ('cantilever', field(5e-3, 90), ('linear', 'planar', '3dof'),
+                      ('planar', 1024)),
+    'cantilever 135': ('cantilever', field(5e-3, 135), ('linear', 'planar', '3dof'),
+                       ('planar', 1024)),
+    'cantilever 180': ('cantilever', field(5e-3, 180), ('planar', '3dof'), ('planar', 1024)),
+    'braided 5-link': ('braided_chapter5', np.array([0.0, 0.012, 0.006]), ('3dof',),
+                       ('3dof', 24)),
+    'strip 48-link': ('vsr_chapter6', np.array([0.0, 0.015, 0.0]), ('planar', '3dof'),
+                      ('planar', 256)),
+}
+MODELS = {'linear': {'dof': 1, 'linear': True}, 'planar': {'dof': 1}, '3dof': {'dof': 3}}
+
+
+def timed_solve(chain, b, model, repeats):
+    """Return (equilibrium, median cold seconds, median warm seconds)."""
+    options = MODELS[model]
+    cold = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        eq = solve(chain, b, **options)
+        cold.append(time.perf_counter() - t0)
+    warm = []
+    for _ in range(repeats if eq.converged else 0):
+        t0 = time.perf_counter()
+        solve(chain, 1.01 * b, initial=eq.angles_rad, **options)
+        warm.append(time.perf_counter() - t0)
+    return eq, float(np.median(cold)), float(np.median(warm)) if warm else float('nan')
+
+
+def run_scenes(quick):
+    """Return a list of result rows over all scenes and settings."""
+    rows = []
+    for name, (tentacle, b, models, (ref_model, ref_sublinks)) in SCENES.items():
+        spec = load_tentacle(TENTACLES / f'{tentacle}.yaml')
+        length = spec.length_m
+        t0 = time.perf_counter()
+        reference = solve(discretise(spec, sublinks=ref_sublinks), b, **MODELS[ref_model])
+        reference_s = time.perf_counter() - t0
+        assert reference.converged, (name, reference.reason)
+        print(f'{name}: reference {ref_model} x{ref_sublinks} sub-links in '
+              f'{reference_s * 1e3:.1f} ms', flush=True)
+        for model in models:
+            for sublinks in SUBLINKS:
+                chain = discretise(spec, sublinks=sublinks)
+                if model == '3dof' and chain.size > 160:
+                    continue  # dense Newton: past 160 links the reference is cheaper
+                eq, cold_s, warm_s = timed_solve(chain, b, model, 3 if quick else 9)
+                error = float(np.linalg.norm(eq.tip_m - reference.tip_m) / length) \
+                    if eq.converged else float('nan')
+                rows.append({'scene': name, 'model': model, 'sublinks': sublinks,
+                             'links': chain.size, 'converged': eq.converged,
+                             'cold_ms': cold_s * 1e3, 'warm_ms': warm_s * 1e3,
+                             'tip_error_of_L': error, 'reference_ms': reference_s * 1e3})
+    return rows
+
+
+def run_peer(rows, max_wall_s):
+    """Time PyElastica to 1% of L on the 90 degree cantilever; compare with ours there."""
+    try:
+        from peer_elastica import relax_cantilever
+    except ImportError as exc:
+        print(f'peer: not available ({exc}); run `make bench-model`')
+        return None
+    spec = load_tentacle(TENTACLES / 'cantilever.yaml')
+    segment = spec.segments[0]
+    length = spec.length_m
+    reference = solve(discretise(spec, sublinks=1024), SCENES['cantilever 90'][1])
+    magnetisation = float(np.linalg.norm(segment.magnetisation_a_per_m))
+    kwargs = {'length_m': length, 'diameter_m': 2 * np.sqrt(segment.area_m2 / np.pi),
+              'youngs_pa': segment.modulus_pa[0], 'density_kg_m3': segment.density_kg_m3,
+              'magnetisation_a_per_m': magnetisation, 'field_t': SCENES['cantilever 90'][1],
+              'reference_tip_m': reference.tip_m[:2]}
+    relax_cantilever(10, tolerance_m=0.0, max_wall_s=1.0, **kwargs)  # numba compiles here
+    results = {}
+    for elements in (50, 100):
+        results[elements] = relax_cantilever(elements, tolerance_m=0.01 * length,
+                                             max_wall_s=max_wall_s, **kwargs)
+        print(f'peer: {elements} elements -> {results[elements]}', flush=True)
+    # Ours at equal accuracy: the coarsest nonlinear setting within 1% of L.
+    ours = [r for r in rows if r['scene'] == 'cantilever 90' and r['model'] != 'linear'
+            and r['tip_error_of_L'] <= 0.01]
+    fastest = min(ours, key=lambda r: (r['links'], r['cold_ms']))
+    peer_s = min((r['wall_s_to_tolerance'] for r in results.values()
+                  if r['wall_s_to_tolerance'] is not None), default=None)
+    return {'peer': {str(k): v for k, v in results.items()}, 'ours': fastest,
+            'peer_wall_s': peer_s,
+            'speedup': None if peer_s is None else peer_s / (fastest['cold_ms'] / 1e3)}
+
+
+def print_table(rows):
+    """Print one row per scene, model and sub-link count."""
+    print(f'\n{"scene":16} {"model":7} {"sub":>4} {"links":>5} {"cold ms":>9} {"warm ms":>9} '
+          f'{"tip error / L":>14}')
+    for r in rows:
+        print(f'{r["scene"]:16} {r["model"]:7} {r["sublinks"]:4d} {r["links"]:5d} '
+              f'{r["cold_ms"]:9.3f} {r["warm_ms"]:9.3f} {r["tip_error_of_L"]:14.2e}'
+              + ('' if r['converged'] else '  (not converged)'))
+
+
+def plot(rows, path):
+    """Write error against time per scene, with the Pareto front, to a PNG."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    scenes = list(SCENES)
+    fig, axes = plt.subplots(1, len(scenes), figsize=(4 * len(scenes), 3.6), sharey=True)
+    for ax, scene in zip(axes, scenes):
+        for model, marker, colour in (('linear', 's', 'C0'), ('planar', 'o', 'C1'),
+                                      ('3dof', '^', 'C2')):
+            pts = [(r['cold_ms'], max(r['tip_error_of_L'], 1e-9)) for r in rows
+                   if r['scene'] == scene and r['model'] == model and r['converged']]
+            if pts:
+                ax.loglog(*zip(*pts), marker=marker, color=colour, label=model)
+        front = sorted((r['cold_ms'], max(r['tip_error_of_L'], 1e-9)) for r in rows
+                       if r['scene'] == scene and r['converged'])
+        best, pareto = np.inf, []
+        for t, e in front:
+            if e < best:
+                best = e
+                pareto.append((t, e))
+        ax.step(*zip(*pareto), where='post', color='k', lw=0.8, label='Pareto front')
+        ax.axhline(0.01, color='grey', ls=':', lw=0.8)
+        ax.set_title(scene, fontsize=9)
+        ax.set_xlabel('time per solve, cold (ms)')
+    axes[0].set_ylabel('tip error / L')
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    print(f'plot: {path}')
+
+
+def main():
+    """Run every scene and setting, then the peer; print, save JSON and the plot."""
+    parser = argparse.ArgumentParser(description=__doc__.strip().split('\n')[0])
+    parser.add_argument('--quick', action='store_true', help='fewer repeats')
+    parser.add_argument('--no-peer', action='store_true', help='skip PyElastica')
+    parser.add_argument('--peer-seconds', type=float, default=30.0)
+    opts = parser.parse_args()
+    rows = run_scenes(opts.quick)
+    print_table(rows)
+    peer = None if opts.no_peer else run_peer(rows, opts.peer_seconds)
+    if peer:
+        ours = peer['ours']
+        print(f'\nat 1% of L on the 90 degree cantilever: ours {ours["model"]} '
+              f'x{ours["sublinks"]} {ours["cold_ms"]:.2f} ms (error '
+              f'{ours["tip_error_of_L"]:.2%}); PyElastica '
+              + (f'{peer["peer_wall_s"]:.2f} s: {peer["speedup"]:.0f}x'
+                 if peer['peer_wall_s'] else 'never within 1% in the time given'))
+    out = ROOT / 'bench' / 'out'
+    out.mkdir(parents=True, exist_ok=True)
+    (out / 'model_tradeoff.json').write_text(json.dumps({'rows': rows, 'peer': peer},
+                                                        indent=2, default=str))
+    plot(rows, out / 'model_tradeoff.png')
+    print(f'machine: {os.cpu_count()} cores')
+
+
+if __name__ == '__main__':
+    main()

@@ -27,6 +27,9 @@ test: $(STAMP)
 test-fast: $(STAMP)
 	$(PY) -m pytest -q -m "not ros"
 
+lint: $(STAMP)
+	$(PY) -m pytest -q tests/test_lint.py
+
 build: $(STAMP)
 	cd ros_ws && ../$(VENV)/bin/colcon build --symlink-install
 

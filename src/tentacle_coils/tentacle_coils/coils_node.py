@@ -147,7 +147,10 @@ class CoilsNode(Node):
         if msg.data != self.bank.estopped:
             self.get_logger().warning('estop ' + ('ENGAGED: ramping to zero, outputs off'
                                                   if msg.data else 'released'))
-        self.bank.set_estop(msg.data)
+        try:
+            self.bank.set_estop(msg.data)
+        except CommandRejected as exc:
+            self.get_logger().error(f'estop could not reach the coil bank: {exc}')
 
     def on_enable(self, request, response):
         """Energise or de-energise the outputs."""

@@ -1,5 +1,5 @@
 """
-The inverse residual for the planner: torque balance at given joint angles (planar).
+The inverse residual for the planner: torque balance at given joint angles.
 
 Thesis eq. 6.6: at equilibrium the elastic torque at joint i balances the magnetic torques on
 every link distal of it. With joint angles Q prescribed (the desired shape), the residual
@@ -9,10 +9,12 @@ every link distal of it. With joint angles Q prescribed (the desired shape), the
 is zero exactly when Q is an equilibrium; it is minus the energy gradient in joint
 coordinates (lambda = J^T tau - K Q). The planner varies the magnetisation directions psi_n
 (in the link frame, radian) and the field B = (B_x, B_y) in the base plane (tesla), so this
-module returns the residual with its derivatives with respect to both, in closed form.
+module returns the residual with its derivatives with respect to both, in closed form;
+residual_3dof does the same for bend-bend-twist joints (thesis eq. 5.2).
 """
 
 import numpy as np
+from tentacle_planner import spatial
 
 
 def residual(joint_angles_rad, stiffness_n_m, moment_a_m2, psi_rad, field_t):
@@ -36,3 +38,34 @@ def residual(joint_angles_rad, stiffness_n_m, moment_a_m2, psi_rad, field_t):
     dtau_dpsi = -mu * (cos * bx + sin * by)      # = -(m . B)
     dtau_db = np.column_stack([-mu * sin, mu * cos])
     return lam, distal * dtau_dpsi[None, :], distal @ dtau_db
+
+
+def residual_3dof(chain, joint_angles_rad, field_t):
+    """
+    Return the 3-DoF torque balance and its derivatives at prescribed joint angles.
+
+    lambda_e = a_e . T_J(e) - k_e q_e for every elementary joint e (bend_1, bend_2, twist of
+    each joint), i.e. minus the energy gradient (spatial.py). The planner varies the field
+    and the magnetic moments, so the derivatives are taken with respect to B (world frame)
+    and to each link's moment vector in its own frame (A m^2); a parameterisation of the
+    directions (angles, unit vectors) chains onto the latter.
+
+    :param chain: a Chain; its moments_a_m2 are the moments the residual is evaluated at
+    :param joint_angles_rad: (n, 3) prescribed joint angles Q
+    :param field_t: (3,) uniform field, tesla
+    :return: (lambda (n, 3) N m, d lambda / d B (n, 3, 3) N m / T,
+        d lambda / d m (n, 3, n, 3) N m / (A m^2): [joint, angle, link, component])
+    """
+    q = np.asarray(joint_angles_rad, dtype=float)
+    b = np.asarray(field_t, dtype=float)
+    loads = spatial.Loads(chain, q, b, np.zeros(3))
+    lam = -spatial.gradient(chain, q, loads)
+    # a . (V x B) = B . (a x V): linear in B.
+    d_field = spatial.cross(loads.axes, loads.V[:, None, :])
+    # a . (R_i m_i x B) = m_i . R_i^T (B x a): only links distal of the joint count.
+    b_cross_a = spatial.cross(np.broadcast_to(b, loads.axes.shape), loads.axes)
+    n = chain.size
+    d_moment = np.einsum('ikl,jck->jcil', loads.rotations, b_cross_a)
+    distal = np.arange(n)[None, :] >= np.arange(n)[:, None]      # [joint j, link i]: i >= j
+    d_moment *= distal[:, None, :, None]
+    return lam, d_field, d_moment

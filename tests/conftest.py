@@ -4,9 +4,22 @@ Cross-process test rig: emulated supplies and the coils node as real processes o
 Every process a test starts is stopped when the test ends.
 """
 
+import pathlib
+import subprocess
+import sys
+
 import pytest
 from rig_support import ROOT  # sets the private ROS domain before anything imports rclpy
 from tentacle_sim.sim_rig import CoilRig
+
+
+@pytest.fixture(scope='session', autouse=True)
+def clean_shared_memory():
+    """After the run, remove the DDS shared-memory segments of processes that were killed."""
+    yield
+    fastdds = pathlib.Path(sys.executable).parent / 'fastdds'
+    if fastdds.exists():  # removes only segments whose owner process is gone
+        subprocess.run([str(fastdds), 'shm', 'clean'], capture_output=True, timeout=30)
 
 
 @pytest.fixture

@@ -30,9 +30,6 @@ def _claim_domain():
 DOMAIN_ID, _DOMAIN_LOCK = _claim_domain()
 os.environ['ROS_DOMAIN_ID'] = str(DOMAIN_ID)
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-os.environ['PYTHONPATH'] = os.pathsep.join(
-    [str(p) for p in sorted((ROOT / 'src').iterdir()) if (p / 'package.xml').exists()]
-    + [os.environ.get('PYTHONPATH', '')]).rstrip(os.pathsep)
 os.environ['PYTHONUNBUFFERED'] = '1'
 
 

@@ -123,6 +123,9 @@ class CoilsNode(Node):
         self.last_rejection = reason
         now = time.monotonic()
         if now - self._last_logged.get(reason, -math.inf) >= 1.0:
+            if len(self._last_logged) > 64:  # reasons carry values: forget the stale ones
+                self._last_logged = {r: t for r, t in self._last_logged.items()
+                                     if now - t < 1.0}
             self._last_logged[reason] = now
             self.get_logger().warning(f'field command rejected: {reason}')
 

@@ -9,7 +9,9 @@ module only wires it to ROS.
 
 import logging
 import math
+import signal
 import sys
+import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -17,9 +19,10 @@ from geometry_msgs.msg import Vector3Stamped
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 import rclpy
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Bool
 from std_srvs.srv import SetBool
 
@@ -215,6 +218,36 @@ class CoilsNode(Node):
             logger.removeHandler(fallback)
 
 
+def spin_until_signal(node, poll_s=0.1):
+    """
+    Spin until SIGINT or SIGTERM (or the context ends); return the signal number or 0.
+
+    rclpy's own handlers shut the context down and then raise KeyboardInterrupt at whatever
+    bytecode is running; if that is a destructor the exception is swallowed and the next
+    wait fails on the dead context. Here a signal only sets a flag, so the executor stops
+    between callbacks and the context stays valid for the safe stop that follows.
+    """
+    stop = threading.Event()
+    received = []
+
+    def on_signal(signum, _frame):
+        received.append(signum)
+        stop.set()
+
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    try:
+        while not stop.is_set() and node.context.ok():
+            executor.spin_once(timeout_sec=poll_s)
+    finally:
+        executor.remove_node(node)
+        executor.shutdown()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    return received[0] if received else 0
+
+
 def main(args=None):
     """Run the node; on exit (Ctrl-C, SIGTERM, error) leave the coils at zero and off."""
     argv = sys.argv[1:] if args is None else args
@@ -222,11 +255,11 @@ def main(args=None):
         print('usage: coils_node [--ros-args --params-file FILE | -p NAME:=VALUE ...]\n\n'
               + __doc__ + '\nparameters:\n' + describe())
         return
-    rclpy.init(args=args)
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     try:
         node = CoilsNode()
-        rclpy.spin(node)
+        spin_until_signal(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (CoilsError, ParameterException) as exc:

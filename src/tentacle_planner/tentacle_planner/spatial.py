@@ -18,8 +18,15 @@ links distal of joint J (world frame) and T_J = V_J x B + W_J x g their torque,
 
 since an axis turns with every earlier angle (d a_e / d q_f = a_f x a_e) and every distal
 vector too (d v / d q_f = a_f x v).
+
+Kinematics, energy, gradient and Hessian are one compiled pass (numba): a Newton iteration
+of a 5-link chain is tens of microseconds, where the same maths as numpy calls on (n, 3)
+arrays spent a quarter of a millisecond in call overhead (bench/model_tradeoff.py).
 """
 
+from dataclasses import dataclass
+
+import numba
 import numpy as np
 
 
@@ -30,48 +37,6 @@ def cross(a, b):
     return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
-def _local_rotations(q):
-    """
-    Return Rz(q0) Ry(q1) Rx(q2) for every joint (n, 3, 3), and Rz(q0) Ry(q1) e_x (n, 3).
-
-    Written out (ZYX Euler angles) so a whole chain costs a few vector operations.
-    """
-    c0, s0 = np.cos(q[:, 0]), np.sin(q[:, 0])
-    c1, s1 = np.cos(q[:, 1]), np.sin(q[:, 1])
-    c2, s2 = np.cos(q[:, 2]), np.sin(q[:, 2])
-    r = np.empty((len(q), 3, 3))
-    r[:, 0, 0] = c0 * c1
-    r[:, 0, 1] = c0 * s1 * s2 - s0 * c2
-    r[:, 0, 2] = c0 * s1 * c2 + s0 * s2
-    r[:, 1, 0] = s0 * c1
-    r[:, 1, 1] = s0 * s1 * s2 + c0 * c2
-    r[:, 1, 2] = s0 * s1 * c2 - c0 * s2
-    r[:, 2, 0] = -s1
-    r[:, 2, 1] = c1 * s2
-    r[:, 2, 2] = c1 * c2
-    return r, np.column_stack([-s0, c0, np.zeros_like(c0)])
-
-
-def kinematics(chain, q):
-    """
-    Return (link rotations (n, 3, 3), joint axes in the world (n, 3, 3): [joint, axis]).
-
-    Axis 0 is the parent's z; axis 1 the parent's y turned by the first bend; axis 2 the
-    link's own x.
-    """
-    local, y_after_bend = _local_rotations(q)
-    rotations = np.empty_like(local)
-    parent = chain.base_rotation
-    for j in range(len(q)):
-        parent = rotations[j] = parent @ local[j]
-    parents = np.concatenate([chain.base_rotation[None], rotations[:-1]])
-    axes = np.empty_like(local)
-    axes[:, 0] = parents[:, :, 2]
-    axes[:, 1] = np.einsum('nij,nj->ni', parents, y_after_bend)
-    axes[:, 2] = rotations[:, :, 0]
-    return rotations, axes
-
-
 def gravity_levers(chain):
     """Return W_i h_i (n,), kg m: (mass distal of link i + half its own) times its length."""
     masses = chain.masses_kg
@@ -79,73 +44,124 @@ def gravity_levers(chain):
     return (distal_mass + masses / 2) * chain.lengths_m
 
 
-class Loads:
-    """What the loads contribute at one configuration: moments, levers and distal sums."""
+@dataclass(frozen=True)
+class Evaluation:
+    """The chain at one configuration q (n, 3); world frame, SI units."""
 
-    def __init__(self, chain, q, field_t, gravity_m_s2, levers=None):
-        """
-        Compute frames, world moments v_i, gravity levers w_i and their distal sums.
-
-        :param levers: gravity_levers(chain), if the caller already has them
-        """
-        self.field = np.asarray(field_t, dtype=float)
-        self.gravity = np.asarray(gravity_m_s2, dtype=float)
-        self.rotations, self.axes = kinematics(chain, q)
-        self.v = (self.rotations @ chain.moments_a_m2[:, :, None])[:, :, 0]
-        self.V = np.cumsum(self.v[::-1], axis=0)[::-1]
-        self.T = cross(self.V, self.field)
-        self.has_gravity = bool(self.gravity.any())
-        if self.has_gravity:
-            levers = gravity_levers(chain) if levers is None else levers
-            self.w = levers[:, None] * self.rotations[:, :, 0]
-            self.W = np.cumsum(self.w[::-1], axis=0)[::-1]
-            self.T += cross(self.W, self.gravity)
+    rotations: np.ndarray       # (n, 3, 3) link frames
+    axes: np.ndarray            # (n, 3, 3) joint axes [joint, bend_1 / bend_2 / twist, xyz]
+    points_m: np.ndarray        # (n + 1, 3) joints and tip, base first
+    energy_j: float
+    gradient: np.ndarray        # (n, 3) dU/dq, N m
+    hessian: np.ndarray         # (3n, 3n), N m / rad^2, flattened (joint, angle); or None
+    distal_moments: np.ndarray  # (n, 3) V_J, A m^2
+    torques: np.ndarray         # (n, 3) T_J = V_J x B + W_J x g, N m
 
 
-def energy(chain, q, loads):
-    """Return the total potential energy, J."""
-    u = 0.5 * float(np.sum(chain.stiffness_n_m * q * q)) - float(np.sum(loads.v @ loads.field))
-    if loads.has_gravity:
-        u -= float(np.sum(loads.w @ loads.gravity))
-    return u
+def evaluate(chain, q, field_t, gravity_m_s2=(0.0, 0.0, 0.0), hessian=True, levers=None):
+    """
+    Return the Evaluation of a chain at joint angles q (n, 3), rad.
+
+    :param field_t: (3,) uniform field, tesla, world frame
+    :param gravity_m_s2: (3,) gravity, world frame
+    :param hessian: also the Hessian (the dominant cost past a few tens of links)
+    :param levers: gravity_levers(chain), if the caller already has them
+    """
+    levers = gravity_levers(chain) if levers is None else levers
+    out = _evaluate(np.ascontiguousarray(q, dtype=float), chain.base_rotation,
+                    chain.base_position_m, chain.lengths_m, chain.moments_a_m2, levers,
+                    chain.stiffness_n_m, np.asarray(field_t, dtype=float),
+                    np.asarray(gravity_m_s2, dtype=float), hessian)
+    rotations, axes, points_m, energy_j, grad, hess, distal, torques = out
+    return Evaluation(rotations, axes, points_m, energy_j, grad, hess if hessian else None,
+                      distal, torques)
 
 
-def gradient(chain, q, loads):
-    """Return dU/dq (n, 3), N m."""
-    return chain.stiffness_n_m * q - np.einsum('jci,ji->jc', loads.axes, loads.T)
-
-
-def hessian(chain, q, loads):
-    """Return the Hessian (3n, 3n) in the flattened order (joint, then bend_1, bend_2, twist)."""
-    size = 3 * chain.size
-    a = loads.axes.reshape(size, 3)
-    joint = np.repeat(np.arange(chain.size), 3)
-    V, T = loads.V[joint], loads.T[joint]
-    B = loads.field
-    dots = a @ a.T                                   # (a_e . a_f)
-    # -(a_f x a_e) . T_e = -(a_e x T_e) . a_f; it vanishes by itself on the diagonal.
-    h = -(cross(a, T) @ a.T) - np.outer(np.einsum('ij,ij->i', a, V), a @ B) \
-        + dots * (V @ B)[:, None]
-    if loads.has_gravity:
-        W, g = loads.W[joint], loads.gravity
-        h += dots * (W @ g)[:, None] - np.outer(np.einsum('ij,ij->i', a, W), a @ g)
-    upper = _upper_indices(size)
-    h[upper] = h.T[upper]  # the formula holds for f <= e: mirror the lower triangle
-    h.flat[::size + 1] += chain.stiffness_n_m.reshape(-1)
-    return h
-
-
-_UPPER = {}
-
-
-def _upper_indices(size):
-    """Return (and remember) the strict upper-triangle indices of a size x size matrix."""
-    if size not in _UPPER:
-        _UPPER[size] = np.triu_indices(size, 1)
-    return _UPPER[size]
-
-
-def points(chain, rotations):
-    """Return the joint positions and the tip, (n + 1, 3), m, base first."""
-    steps = chain.lengths_m[:, None] * rotations[:, :, 0]
-    return chain.base_position_m + np.vstack([np.zeros(3), np.cumsum(steps, axis=0)])
+@numba.njit(cache=True)
+def _evaluate(q, base_rotation, base_position, lengths, moments, levers, stiffness, field,
+              gravity, want_hessian):
+    """Compiled pass over the chain: see Evaluation and the module docstring."""
+    n = q.shape[0]
+    rotations = np.empty((n, 3, 3))
+    axes = np.empty((n, 3, 3))
+    points = np.empty((n + 1, 3))
+    parent = base_rotation.copy()
+    local = np.empty((3, 3))
+    points[0] = base_position
+    energy = 0.0
+    v = np.empty((n, 3))
+    w = np.empty((n, 3))
+    for i in range(n):
+        c0, s0 = np.cos(q[i, 0]), np.sin(q[i, 0])
+        c1, s1 = np.cos(q[i, 1]), np.sin(q[i, 1])
+        c2, s2 = np.cos(q[i, 2]), np.sin(q[i, 2])
+        # Rz(q0) Ry(q1) Rx(q2), written out.
+        local[0, 0] = c0 * c1
+        local[0, 1] = c0 * s1 * s2 - s0 * c2
+        local[0, 2] = c0 * s1 * c2 + s0 * s2
+        local[1, 0] = s0 * c1
+        local[1, 1] = s0 * s1 * s2 + c0 * c2
+        local[1, 2] = s0 * s1 * c2 - c0 * s2
+        local[2, 0] = -s1
+        local[2, 1] = c1 * s2
+        local[2, 2] = c1 * c2
+        for r in range(3):
+            axes[i, 0, r] = parent[r, 2]
+            axes[i, 1, r] = c0 * parent[r, 1] - s0 * parent[r, 0]
+            for c in range(3):
+                rotations[i, r, c] = (parent[r, 0] * local[0, c] + parent[r, 1] * local[1, c]
+                                      + parent[r, 2] * local[2, c])
+        for r in range(3):
+            axes[i, 2, r] = rotations[i, r, 0]
+            points[i + 1, r] = points[i, r] + lengths[i] * rotations[i, r, 0]
+            v[i, r] = (rotations[i, r, 0] * moments[i, 0] + rotations[i, r, 1] * moments[i, 1]
+                       + rotations[i, r, 2] * moments[i, 2])
+            w[i, r] = levers[i] * rotations[i, r, 0]
+            energy -= v[i, r] * field[r] + w[i, r] * gravity[r]
+            for c in range(3):
+                parent[r, c] = rotations[i, r, c]
+        for c in range(3):
+            energy += 0.5 * stiffness[i, c] * q[i, c] * q[i, c]
+    # Distal sums from the tip, and the load torque at each joint.
+    distal_v = np.empty((n, 3))
+    distal_w = np.empty((n, 3))
+    torques = np.empty((n, 3))
+    for i in range(n - 1, -1, -1):
+        for r in range(3):
+            distal_v[i, r] = v[i, r] + (distal_v[i + 1, r] if i + 1 < n else 0.0)
+            distal_w[i, r] = w[i, r] + (distal_w[i + 1, r] if i + 1 < n else 0.0)
+        V, W = distal_v[i], distal_w[i]
+        torques[i, 0] = V[1] * field[2] - V[2] * field[1] + W[1] * gravity[2] - W[2] * gravity[1]
+        torques[i, 1] = V[2] * field[0] - V[0] * field[2] + W[2] * gravity[0] - W[0] * gravity[2]
+        torques[i, 2] = V[0] * field[1] - V[1] * field[0] + W[0] * gravity[1] - W[1] * gravity[0]
+    grad = np.empty((n, 3))
+    for i in range(n):
+        for c in range(3):
+            a = axes[i, c]
+            grad[i, c] = stiffness[i, c] * q[i, c] - (a[0] * torques[i, 0] + a[1] * torques[i, 1]
+                                                      + a[2] * torques[i, 2])
+    size = 3 * n if want_hessian else 0
+    hess = np.empty((size, size))
+    if want_hessian:
+        a = axes.reshape(size, 3)
+        a_field = a[:, 0] * field[0] + a[:, 1] * field[1] + a[:, 2] * field[2]
+        a_gravity = a[:, 0] * gravity[0] + a[:, 1] * gravity[1] + a[:, 2] * gravity[2]
+        for e in range(size):
+            j = e // 3
+            ae, V, W, T = a[e], distal_v[j], distal_w[j], torques[j]
+            u0 = ae[1] * T[2] - ae[2] * T[1]    # a_e x T_e
+            u1 = ae[2] * T[0] - ae[0] * T[2]
+            u2 = ae[0] * T[1] - ae[1] * T[0]
+            alpha = ae[0] * V[0] + ae[1] * V[1] + ae[2] * V[2]
+            gamma = ae[0] * W[0] + ae[1] * W[1] + ae[2] * W[2]
+            beta = (V[0] * field[0] + V[1] * field[1] + V[2] * field[2]
+                    + W[0] * gravity[0] + W[1] * gravity[1] + W[2] * gravity[2])
+            for f in range(e + 1):
+                af = a[f]
+                value = (-(u0 * af[0] + u1 * af[1] + u2 * af[2]) - alpha * a_field[f]
+                         - gamma * a_gravity[f]
+                         + (ae[0] * af[0] + ae[1] * af[1] + ae[2] * af[2]) * beta)
+                hess[e, f] = value
+                hess[f, e] = value
+            hess[e, e] += stiffness[j, e % 3]
+    return rotations, axes, points, energy, grad, hess, distal_v, torques

@@ -58,14 +58,14 @@ def residual_3dof(chain, joint_angles_rad, field_t):
     """
     q = np.asarray(joint_angles_rad, dtype=float)
     b = np.asarray(field_t, dtype=float)
-    loads = spatial.Loads(chain, q, b, np.zeros(3))
-    lam = -spatial.gradient(chain, q, loads)
+    state = spatial.evaluate(chain, q, b, hessian=False)
+    lam = -state.gradient
     # a . (V x B) = B . (a x V): linear in B.
-    d_field = spatial.cross(loads.axes, loads.V[:, None, :])
+    d_field = spatial.cross(state.axes, state.distal_moments[:, None, :])
     # a . (R_i m_i x B) = m_i . R_i^T (B x a): only links distal of the joint count.
-    b_cross_a = spatial.cross(np.broadcast_to(b, loads.axes.shape), loads.axes)
+    b_cross_a = spatial.cross(np.broadcast_to(b, state.axes.shape), state.axes)
     n = chain.size
-    d_moment = np.einsum('ikl,jck->jcil', loads.rotations, b_cross_a)
+    d_moment = np.einsum('ikl,jck->jcil', state.rotations, b_cross_a)
     distal = np.arange(n)[None, :] >= np.arange(n)[:, None]      # [joint j, link i]: i >= j
     d_moment *= distal[:, None, :, None]
     return lam, d_field, d_moment

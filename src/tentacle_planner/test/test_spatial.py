@@ -22,10 +22,10 @@ def test_gradient_and_hessian_match_finite_differences(seed):
     q = rng.uniform(-1, 1, (4, 3))
 
     def energy(q):
-        return spatial.energy(chain, q, spatial.Loads(chain, q, field, gravity))
+        return spatial.evaluate(chain, q, field, gravity, hessian=False).energy_j
 
     def gradient(q):
-        return spatial.gradient(chain, q, spatial.Loads(chain, q, field, gravity))
+        return spatial.evaluate(chain, q, field, gravity, hessian=False).gradient
 
     eps = 1e-6
     basis = np.eye(12).reshape(12, 4, 3)
@@ -35,20 +35,20 @@ def test_gradient_and_hessian_match_finite_differences(seed):
                                atol=1e-8 * np.abs(fd_grad).max())
     fd_hess = np.column_stack([((gradient(q + eps * e) - gradient(q - eps * e))
                                 / (2 * eps)).reshape(-1) for e in basis])
-    hess = spatial.hessian(chain, q, spatial.Loads(chain, q, field, gravity))
+    hess = spatial.evaluate(chain, q, field, gravity).hessian
     np.testing.assert_allclose(hess, fd_hess, rtol=1e-6, atol=1e-8 * np.abs(fd_hess).max())
 
 
 def test_gravity_energy_is_the_height_of_the_centres_of_mass():
     chain, rng = random_chain(5, 7)
     q = rng.uniform(-1, 1, (5, 3))
-    loads = spatial.Loads(chain, q, np.zeros(3), [0.0, 0.0, -9.81])
-    pts = spatial.points(chain, loads.rotations)
+    state = spatial.evaluate(chain, q, np.zeros(3), [0.0, 0.0, -9.81])
+    pts = state.points_m
     centres = (pts[:-1] + pts[1:]) / 2
     elastic = 0.5 * np.sum(chain.stiffness_n_m * q * q)
     expected = elastic + np.sum(chain.masses_kg * 9.81 * (centres[:, 2]
                                                           - chain.base_position_m[2]))
-    assert spatial.energy(chain, q, loads) == pytest.approx(expected)
+    assert state.energy_j == pytest.approx(expected)
 
 
 @pytest.mark.parametrize('degrees', [60, 135])

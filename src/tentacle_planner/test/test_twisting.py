@@ -52,9 +52,9 @@ def untwisted_stability(chain):
     """Smallest 3-DoF Hessian eigenvalue at the planar (untwisted) equilibrium."""
     flat = solve(chain, FIELD_T, dof=1)
     q = np.column_stack([np.diff(flat.angles_rad, prepend=0.0), np.zeros((chain.size, 2))])
-    loads = spatial.Loads(chain, q, FIELD_T, np.zeros(3))
-    assert np.max(np.abs(spatial.gradient(chain, q, loads))) < 1e-9  # it is an equilibrium
-    return np.linalg.eigvalsh(spatial.hessian(chain, q, loads))[0]
+    state = spatial.evaluate(chain, q, FIELD_T)
+    assert np.max(np.abs(state.gradient)) < 1e-9  # it is an equilibrium
+    return np.linalg.eigvalsh(state.hessian)[0]
 
 
 def test_unreinforced_rod_twists_and_braided_rod_bends():

@@ -77,6 +77,20 @@ def evaluate(chain, q, field_t, gravity_m_s2=(0.0, 0.0, 0.0), hessian=True, leve
                       distal, torques)
 
 
+def points_linear(chain, q):
+    """
+    Return joint positions and tip (n + 1, 3), m, with kinematics linearised about q = 0.
+
+    At q = 0 every joint's axes are the base frame's z, y and x, so link i is turned by the
+    small rotation vector phi_i = sum over joints j <= i of (q_j2, q_j1, q_j0) (base frame)
+    and its direction is e_x + phi_i x e_x = (1, phi_z, -phi_y).
+    """
+    phi = np.cumsum(np.asarray(q, dtype=float), axis=0)
+    directions = np.column_stack([np.ones(len(phi)), phi[:, 0], -phi[:, 1]])
+    steps = chain.lengths_m[:, None] * (directions @ chain.base_rotation.T)
+    return chain.base_position_m + np.vstack([np.zeros(3), np.cumsum(steps, axis=0)])
+
+
 @numba.njit(cache=True)
 def _evaluate(q, base_rotation, base_position, lengths, moments, levers, stiffness, field,
               gravity, want_hessian):

@@ -164,6 +164,39 @@ class _Spatial:
         return x.reshape(-1, 3), self.evaluate(x).points_m
 
 
+class _SpatialLinear:
+    """3-DoF small-angle model: the energy's quadratic Taylor model about q = 0."""
+
+    linear = True
+
+    def __init__(self, chain, field_t, gravity_m_s2):
+        self.chain = chain
+        self.size = 3 * chain.size
+        straight = spatial.evaluate(chain, np.zeros((chain.size, 3)), field_t, gravity_m_s2)
+        self.u0, self.g0 = straight.energy_j, straight.gradient.reshape(-1)
+        self.h0, self.load_scale = straight.hessian, np.max(np.abs(straight.gradient))
+
+    def energy(self, x):
+        return self.u0 + self.g0 @ x + 0.5 * x @ self.h0 @ x
+
+    def gradient(self, x):
+        return self.g0 + self.h0 @ x
+
+    def torque_scale(self, x):
+        return max(self.load_scale, np.max(np.abs(self.h0 @ x)), 1e-300)
+
+    def newton_step(self, x, g):
+        factor, info = potrf(self.h0, lower=True, clean=False)
+        return -potrs(factor, g, lower=True)[0] if info == 0 else -g / np.max(np.diag(self.h0))
+
+    def smallest_eigen(self, x):
+        values, vectors = eigh(self.h0, subset_by_index=[0, 0], check_finite=False)
+        return float(values[0]), vectors[:, 0], np.max(np.abs(np.diag(self.h0)))
+
+    def result(self, x):
+        return x.reshape(-1, 3), spatial.points_linear(self.chain, x.reshape(-1, 3))
+
+
 def _blas_threads(size):
     """Return a context that keeps BLAS on one thread for a dense problem of this size."""
     if size > SINGLE_THREAD_MAX_SIZE:
@@ -246,10 +279,10 @@ def solve(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=1, initial=None, tol
     :param initial: the previous state to start from: (n,) link angles for dof 1, (n, 3)
         joint angles for dof 3, rad
     :param tol: converged when max |dU/dq| <= tol * the largest torque in the balance
-    :param linear: small-angle model (planar only): one linear solve; no minimum exists when
-        a magnet is at an obtuse angle to the field, and the result says so
-    :raises ValueError: non-finite field or gravity, an initial state of the wrong shape,
-        linear with 3-DoF joints
+    :param linear: small-angle model: the energy's quadratic Taylor model about the straight
+        state and linearised kinematics, one linear solve; no minimum exists when a magnet
+        is at an obtuse angle to the field, and the result says so
+    :raises ValueError: non-finite field or gravity, an initial state of the wrong shape
     """
     n = chain.size
     if dof not in (1, 3):
@@ -264,10 +297,10 @@ def solve(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=1, initial=None, tol
         return Equilibrium(np.zeros((0,) if dof == 1 else (0, 3)),
                            chain.base_position_m[None, :].copy(), True, 'nothing inserted',
                            0, 0.0, np.inf, 0.0)  # no degree of freedom: vacuously stable
-    if linear and dof != 1:
-        raise ValueError('the linearised model is planar only (dof 1)')
-    problem = _Planar(chain, field_t, gravity_m_s2, linear) if dof == 1 else _Spatial(
-        chain, field_t, gravity_m_s2)
+    if dof == 1:
+        problem = _Planar(chain, field_t, gravity_m_s2, linear)
+    else:
+        problem = (_SpatialLinear if linear else _Spatial)(chain, field_t, gravity_m_s2)
     shape = (n,) if dof == 1 else (n, 3)
     x = np.zeros(shape) if initial is None else np.array(initial, dtype=float)
     if x.shape != shape or not np.all(np.isfinite(x)):

@@ -33,7 +33,7 @@ def build_parser():
     parser.add_argument('--gravity', nargs=3, type=float, default=(0.0, 0.0, 0.0),
                         metavar=('GX', 'GY', 'GZ'), help='gravity, m/s^2 (default none)')
     parser.add_argument('--linear', action='store_true',
-                        help='small-angle (linearised) model, planar only: one linear solve')
+                        help='small-angle (linearised) model: one linear solve')
     parser.add_argument('--json', action='store_true', help='print one JSON object')
     return parser
 

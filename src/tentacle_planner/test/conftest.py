@@ -16,3 +16,9 @@ def cantilever():
     segment = spec.segments[0]
     return (spec, segment.length_m, segment.bend_stiffness_n_m2[0],
             float(np.linalg.norm(segment.magnetisation_a_per_m)) * segment.area_m2)
+
+
+@pytest.fixture(scope='session')
+def braided():
+    """Return the spec of config/tentacles/braided_chapter5.yaml (5 segments, 3-DoF)."""
+    return load_tentacle(ROOT / 'config' / 'tentacles' / 'braided_chapter5.yaml')

@@ -15,6 +15,7 @@ This staggered (midpoint) scheme converges at second order in the link length.
 from dataclasses import dataclass
 
 import numpy as np
+from tentacle_planner.dipoles import pairs_between_groups
 
 MIN_LINK_FRACTION = 1e-6  # a partial link shorter than this fraction of its full length is dropped
 
@@ -30,6 +31,25 @@ class Chain:
     s_start_m: np.ndarray          # (n,) material coordinate of each link's proximal end
     base_position_m: np.ndarray    # (3,)
     base_rotation: np.ndarray      # (3, 3)
+    segment_index: np.ndarray = None  # (n,) which segment (one magnet) each link belongs to
+    radii_m: np.ndarray = None     # (n,) radius of a circle of the section's area
+
+    def interacting_pairs(self):
+        """Return (i, j) index arrays of the link pairs in different segments (dipoles.py)."""
+        groups = np.arange(self.size) if self.segment_index is None else self.segment_index
+        return pairs_between_groups(groups)
+
+    def contact_distances(self, pairs):
+        """
+        Return (p,) m: how close two magnets' centres may come before they touch.
+
+        The sum of their radii; for links so short or so near along the rod that this is
+        more than half their distance when straight, that half (a fold of over 120 degrees).
+        """
+        i, j = pairs
+        centre = self.s_start_m + self.lengths_m / 2
+        radii = np.zeros(self.size) if self.radii_m is None else self.radii_m
+        return np.minimum(radii[i] + radii[j], 0.5 * np.abs(centre[j] - centre[i]))
 
     @property
     def size(self):
@@ -57,9 +77,9 @@ def discretise(spec, inserted_m=None, sublinks=1, backbone_m=0.0):
         raise ValueError(f'backbone position {backbone_m} m must be >= 0')
     inserted = min(inserted, total)
     s_base = total - inserted
-    rows = []  # (start, length, segment)
+    rows = []  # (start, length, segment, segment index)
     start = 0.0
-    for segment in spec.segments:
+    for index, segment in enumerate(spec.segments):
         h = segment.length_m / sublinks
         for k in range(int(sublinks)):
             a, b = start + k * h, start + (k + 1) * h
@@ -67,7 +87,7 @@ def discretise(spec, inserted_m=None, sublinks=1, backbone_m=0.0):
                 continue
             a_free = max(a, s_base)
             if b - a_free >= MIN_LINK_FRACTION * h:
-                rows.append((a_free, b - a_free, segment))
+                rows.append((a_free, b - a_free, segment, index))
         start += segment.length_m
     n = len(rows)
     lengths = np.array([r[1] for r in rows])
@@ -85,4 +105,5 @@ def discretise(spec, inserted_m=None, sublinks=1, backbone_m=0.0):
                         for r in rows]).reshape(n, 3)
     masses = np.array([r[2].density_kg_m3 * r[2].area_m2 * r[1] for r in rows])
     return Chain(lengths, stiffness, moments, masses, s_start, spec.base_position_m,
-                 spec.base_rotation)
+                 spec.base_rotation, np.array([r[3] for r in rows], dtype=int),
+                 np.array([np.sqrt(r[2].area_m2 / np.pi) for r in rows]))

@@ -18,6 +18,7 @@ W_i = (mass distal of link i) + (half of link i's mass).
 """
 
 import numpy as np
+from tentacle_planner import dipoles
 
 
 def loads(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0)):
@@ -76,6 +77,49 @@ def points(chain, theta):
     steps = chain.lengths_m[:, None] * np.column_stack([np.cos(theta), np.sin(theta)])
     planar = np.vstack([np.zeros(2), np.cumsum(steps, axis=0)])
     return chain.base_position_m + planar @ chain.base_rotation[:, :2].T
+
+
+def interaction(chain, theta, pairs, hessian=True, contact_m=None):
+    """
+    Return (energy J, gradient (n,) N m, Hessian (n, n) or None) of the links' dipole pairs.
+
+    Link i's world moment is R_base Rz(theta_i) m_i and its centre
+    c_i = sum_{j<i} h_j u_j + h_i u_i / 2 with u_j = R_base (cos theta_j, sin theta_j, 0), so
+    with z the base plane's normal, d m_i / d theta_i = z x m_i and d c_i / d theta_j =
+    h_j z x u_j (half of it for j = i); both second derivatives are diagonal in theta
+    (z x (z x v) = -v in the plane), and the Hessian is J^T H_xx J plus that diagonal.
+
+    :param contact_m: (p,) how close each pair may come (chain.contact_distances)
+    :raises dipoles.Contact: two interacting magnets closer than that
+    """
+    n = len(theta)
+    c, s = np.cos(theta), np.sin(theta)
+    local = chain.moments_a_m2
+    in_plane = np.column_stack([c * local[:, 0] - s * local[:, 1],
+                                s * local[:, 0] + c * local[:, 1], np.zeros(n)])
+    base = chain.base_rotation
+    moments = (in_plane + local[:, 2:] * [0.0, 0.0, 1.0]) @ base.T
+    u = np.column_stack([c, s, np.zeros(n)]) @ base.T
+    steps = chain.lengths_m[:, None] * u
+    joints = np.vstack([np.zeros(3), np.cumsum(steps, axis=0)[:-1]])
+    centres = chain.base_position_m + joints + 0.5 * steps
+    loads = dipoles.interaction(moments, centres, pairs, hessian, contact_m)
+    z = base[:, 2]
+    z_m, z_u = np.cross(z, moments), np.cross(z, u)
+    g, f = loads.grad_moments, loads.grad_centres
+    # Force sums over the links a joint's turn carries: all beyond it, half of its own.
+    lever_force = np.cumsum(f[::-1], axis=0)[::-1] - 0.5 * f
+    gradient = np.sum(g * z_m, axis=1) + chain.lengths_m * np.sum(lever_force * z_u, axis=1)
+    if not hessian:
+        return loads.energy_j, gradient, None
+    weight = np.tril(np.broadcast_to(chain.lengths_m, (n, n)), -1) + np.diag(
+        0.5 * chain.lengths_m)                                     # [link i, angle j]
+    jac = np.zeros((6 * n, n))
+    jac[:3 * n] = (np.eye(n)[:, None, :] * z_m[:, :, None]).reshape(3 * n, n)
+    jac[3 * n:] = (weight[:, None, :] * z_u.T[None, :, :]).reshape(3 * n, n)
+    m_perp = moments - np.outer(moments @ z, z)
+    diagonal = -np.sum(g * m_perp, axis=1) - chain.lengths_m * np.sum(lever_force * u, axis=1)
+    return loads.energy_j, gradient, jac.T @ loads.hessian @ jac + np.diag(diagonal)
 
 
 # -- linearised small-angle model: sin t ~ t, cos t ~ 1 - t^2 / 2 in loads and kinematics ----

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
+from tentacle_planner import dipoles
 
 
 def cross(a, b):
@@ -58,7 +59,8 @@ class Evaluation:
     torques: np.ndarray         # (n, 3) T_J = V_J x B + W_J x g, N m
 
 
-def evaluate(chain, q, field_t, gravity_m_s2=(0.0, 0.0, 0.0), hessian=True, levers=None):
+def evaluate(chain, q, field_t, gravity_m_s2=(0.0, 0.0, 0.0), hessian=True, levers=None,
+             pairs=None, contact_m=None):
     """
     Return the Evaluation of a chain at joint angles q (n, 3), rad.
 
@@ -66,6 +68,10 @@ def evaluate(chain, q, field_t, gravity_m_s2=(0.0, 0.0, 0.0), hessian=True, leve
     :param gravity_m_s2: (3,) gravity, world frame
     :param hessian: also the Hessian (the dominant cost past a few tens of links)
     :param levers: gravity_levers(chain), if the caller already has them
+    :param pairs: (i, j) link pairs whose dipoles interact (chain.interacting_pairs()), or
+        None: the links feel the uniform field only
+    :param contact_m: (p,) how close each pair may come (chain.contact_distances)
+    :raises dipoles.Contact: two interacting magnets closer than that
     """
     levers = gravity_levers(chain) if levers is None else levers
     out = _evaluate(np.ascontiguousarray(q, dtype=float), chain.base_rotation,
@@ -73,8 +79,60 @@ def evaluate(chain, q, field_t, gravity_m_s2=(0.0, 0.0, 0.0), hessian=True, leve
                     chain.stiffness_n_m, np.asarray(field_t, dtype=float),
                     np.asarray(gravity_m_s2, dtype=float), hessian)
     rotations, axes, points_m, energy_j, grad, hess, distal, torques = out
+    if pairs is not None and len(pairs[0]):
+        moments = (rotations @ chain.moments_a_m2[:, :, None])[:, :, 0]
+        centres = points_m[:-1] + 0.5 * chain.lengths_m[:, None] * rotations[:, :, 0]
+        extra = dipoles.interaction(moments, centres, pairs, hessian, contact_m)
+        d_grad, d_hess = _project_link_loads(axes, points_m[:-1], moments, centres, extra,
+                                             hessian)
+        energy_j += extra.energy_j
+        grad = grad + d_grad
+        if hessian:
+            hess = hess + d_hess
     return Evaluation(rotations, axes, points_m, energy_j, grad, hess if hessian else None,
                       distal, torques)
+
+
+def _project_link_loads(axes, joints, moments, centres, loads, hessian):
+    """
+    Return (gradient (n, 3), Hessian (3n, 3n) or None) in joint angles of a link energy.
+
+    loads (a dipoles.Interaction) gives the energy's derivatives with respect to each link's
+    world moment m_i and centre c_i: G_i, F_i and their Hessian H_xx. With the Jacobian
+    J = d(m, c)/dq (d m_i / d q_e = a_e x m_i, d c_i / d q_e = a_e x (c_i - o_e) for links
+    distal of joint J(e) at o_e), the Hessian is J^T H_xx J plus, for f <= e,
+    a_f . (a_e x S1_e + S2_e a_e) - (a_f . a_e) s3_e with distal sums over i >= J(e) of
+    S1 = m_i x G_i + d_i x F_i, S2 = G_i m_i^T + F_i d_i^T, s3 = G_i . m_i + F_i . d_i,
+    d_i = c_i - o_e (the second derivatives of m_i and c_i, as in the module docstring).
+    """
+    n = len(moments)
+    size = 3 * n
+    a = axes.reshape(size, 3)
+    joint = np.repeat(np.arange(n), 3)
+    o = joints[joint]                                              # (size, 3)
+    distal = np.arange(n)[:, None] >= joint[None, :]               # [link i, dof e]
+    jm = cross(a[None, :, :], moments[:, None, :]) * distal[:, :, None]
+    jc = cross(a[None, :, :], centres[:, None, :] - o[None, :, :]) * distal[:, :, None]
+    jac = np.concatenate([jm.transpose(0, 2, 1).reshape(size, size),
+                          jc.transpose(0, 2, 1).reshape(size, size)])  # (6n, 3n)
+    g, f = loads.grad_moments, loads.grad_centres
+    gradient = (jac.T @ np.concatenate([g.reshape(-1), f.reshape(-1)])).reshape(n, 3)
+    if not hessian:
+        return gradient, None
+
+    def from_tip(x):  # sums over links i >= j, for every j
+        return np.cumsum(x[::-1], axis=0)[::-1]
+
+    sum_f = from_tip(f)[joint]
+    s1 = (from_tip(cross(moments, g) + cross(centres, f))[joint] - cross(o, sum_f))
+    s2 = (from_tip(g[:, :, None] * moments[:, None, :] + f[:, :, None] * centres[:, None, :])
+          [joint] - sum_f[:, :, None] * o[:, None, :])
+    s3 = (from_tip(np.sum(g * moments + f * centres, axis=1))[joint]
+          - np.sum(o * sum_f, axis=1))
+    w = cross(a, s1) + np.einsum('eij,ej->ei', s2, a)
+    geometric = np.tril(w @ a.T - (a @ a.T) * s3[:, None])         # [e, f], f <= e
+    geometric += np.tril(geometric, -1).T
+    return gradient, jac.T @ loads.hessian @ jac + geometric
 
 
 def points_linear(chain, q):

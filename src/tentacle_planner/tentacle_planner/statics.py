@@ -22,6 +22,7 @@ import numpy as np
 from scipy.linalg import eigh, eigh_tridiagonal, LinAlgError, solveh_banded
 from scipy.linalg.lapack import dpotrf as potrf, dpotrs as potrs
 from tentacle_planner import planar, spatial
+from tentacle_planner.dipoles import Contact
 from threadpoolctl import ThreadpoolController
 
 MAX_STEP_RAD = 0.5       # largest change of any angle in one Newton step
@@ -64,9 +65,12 @@ class Equilibrium:
 class _Planar:
     """Planar chain: x = absolute link angles (n,); linear: small-angle model."""
 
-    def __init__(self, chain, field_t, gravity_m_s2, linear=False):
+    def __init__(self, chain, field_t, gravity_m_s2, linear=False, pairs=None):
         self.chain = chain
         self.linear = linear
+        # Interacting dipoles couple every link with every other: a dense Hessian.
+        self.pairs = pairs if pairs is not None and len(pairs[0]) else None
+        self.contact_m = None if self.pairs is None else chain.contact_distances(pairs)
         if linear:
             self._energy, self._gradient = planar.energy_linear, planar.gradient_linear
             self._hessian, self._points = planar.hessian_banded_linear, planar.points_linear
@@ -78,17 +82,28 @@ class _Planar:
         self.load_scale = np.max(np.abs(self.a) + np.abs(self.b))
         self.size = chain.size
 
+    def interaction(self, x, hessian=False):
+        return planar.interaction(self.chain, x, self.pairs, hessian, self.contact_m)
+
     def energy(self, x):
-        return self._energy(x, self.k, self.a, self.b)
+        u = self._energy(x, self.k, self.a, self.b)
+        return u if self.pairs is None else u + self.interaction(x)[0]
 
     def gradient(self, x):
-        return self._gradient(x, self.k, self.a, self.b)
+        g = self._gradient(x, self.k, self.a, self.b)
+        return g if self.pairs is None else g + self.interaction(x)[1]
+
+    def dense_hessian(self, x):
+        h = planar.hessian_dense(x, self.k, self.a, self.b)
+        return h + self.interaction(x, True)[2]
 
     def torque_scale(self, x):
         return max(self.load_scale, np.max(np.abs(self.k * np.diff(x, prepend=0.0))),
                    1e-9 * np.max(self.k), 1e-300)
 
     def newton_step(self, x, g):
+        if self.pairs is not None:
+            return _dense_newton_step(self.dense_hessian(x), g)
         banded = self._hessian(x, self.k, self.a, self.b)
         if self.size == 1:  # LAPACK's banded solver needs two
             curvature = banded[1, 0]
@@ -98,6 +113,8 @@ class _Planar:
             banded + np.array([[0.0], [shift]]), g, check_finite=False), banded[1], g)
 
     def smallest_eigen(self, x):
+        if self.pairs is not None:
+            return _dense_smallest_eigen(self.dense_hessian(x))
         banded = self._hessian(x, self.k, self.a, self.b)
         if self.size == 1:
             return float(banded[1, 0]), np.ones(1), abs(banded[1, 0])
@@ -114,9 +131,10 @@ class _Spatial:
 
     linear = False
 
-    def __init__(self, chain, field_t, gravity_m_s2):
+    def __init__(self, chain, field_t, gravity_m_s2, pairs=None):
         self.chain = chain
-        self.field, self.gravity = field_t, gravity_m_s2
+        self.field, self.gravity, self.pairs = field_t, gravity_m_s2, pairs
+        self.contact_m = None if pairs is None else chain.contact_distances(pairs)
         self.levers = spatial.gravity_levers(chain)
         self.size = 3 * chain.size
         self._key, self._value = None, None
@@ -127,7 +145,7 @@ class _Spatial:
         if x is self._key:
             return self._value
         value = spatial.evaluate(self.chain, x.reshape(-1, 3), self.field, self.gravity,
-                                 hessian, self.levers)
+                                 hessian, self.levers, self.pairs, self.contact_m)
         if hessian:
             self._key, self._value = x, value
         return value
@@ -145,20 +163,10 @@ class _Spatial:
                    1e-9 * np.max(self.chain.stiffness_n_m), 1e-300)
 
     def newton_step(self, x, g):
-        h = self.evaluate(x).hessian
-        factor, info = potrf(h, lower=True, clean=False)
-        if info == 0:  # positive definite: the plain Newton step
-            return -potrs(factor, g, lower=True)[0]
-        # Indefinite (an obtuse magnet, a saddle nearby): shift just past the most negative
-        # eigenvalue rather than searching for a shift that factorises.
-        lowest = eigh(h, eigvals_only=True, subset_by_index=[0, 0], check_finite=False)[0]
-        shift = -lowest + 1e-6 * max(np.max(np.abs(np.diag(h))), 1e-300)
-        return -np.linalg.solve(h + shift * np.eye(len(g)), g)
+        return _dense_newton_step(self.evaluate(x).hessian, g)
 
     def smallest_eigen(self, x):
-        h = self.evaluate(x).hessian
-        values, vectors = eigh(h, subset_by_index=[0, 0], check_finite=False)
-        return float(values[0]), vectors[:, 0], np.max(np.abs(np.diag(h)))
+        return _dense_smallest_eigen(self.evaluate(x).hessian)
 
     def result(self, x):
         return x.reshape(-1, 3), self.evaluate(x).points_m
@@ -169,10 +177,12 @@ class _SpatialLinear:
 
     linear = True
 
-    def __init__(self, chain, field_t, gravity_m_s2):
-        self.chain = chain
+    def __init__(self, chain, field_t, gravity_m_s2, pairs=None):
+        self.chain, self.pairs = chain, pairs
         self.size = 3 * chain.size
-        straight = spatial.evaluate(chain, np.zeros((chain.size, 3)), field_t, gravity_m_s2)
+        straight = spatial.evaluate(chain, np.zeros((chain.size, 3)), field_t, gravity_m_s2,
+                                    pairs=pairs, contact_m=None if pairs is None else
+                                    chain.contact_distances(pairs))
         self.u0, self.g0 = straight.energy_j, straight.gradient.reshape(-1)
         self.h0, self.load_scale = straight.hessian, np.max(np.abs(straight.gradient))
 
@@ -186,15 +196,31 @@ class _SpatialLinear:
         return max(self.load_scale, np.max(np.abs(self.h0 @ x)), 1e-300)
 
     def newton_step(self, x, g):
-        factor, info = potrf(self.h0, lower=True, clean=False)
-        return -potrs(factor, g, lower=True)[0] if info == 0 else -g / np.max(np.diag(self.h0))
+        return _dense_newton_step(self.h0, g)
 
     def smallest_eigen(self, x):
-        values, vectors = eigh(self.h0, subset_by_index=[0, 0], check_finite=False)
-        return float(values[0]), vectors[:, 0], np.max(np.abs(np.diag(self.h0)))
+        return _dense_smallest_eigen(self.h0)
 
     def result(self, x):
         return x.reshape(-1, 3), spatial.points_linear(self.chain, x.reshape(-1, 3))
+
+
+def _dense_newton_step(h, g):
+    """Return the Newton step -H^-1 g, shifting an indefinite H just past positive."""
+    factor, info = potrf(h, lower=True, clean=False)
+    if info == 0:  # positive definite: the plain Newton step
+        return -potrs(factor, g, lower=True)[0]
+    # Indefinite (an obtuse magnet, a saddle nearby): shift just past the most negative
+    # eigenvalue rather than searching for a shift that factorises.
+    lowest = eigh(h, eigvals_only=True, subset_by_index=[0, 0], check_finite=False)[0]
+    shift = -lowest + 1e-6 * max(np.max(np.abs(np.diag(h))), 1e-300)
+    return -np.linalg.solve(h + shift * np.eye(len(g)), g)
+
+
+def _dense_smallest_eigen(h):
+    """Return (smallest eigenvalue, its eigenvector, the Hessian's diagonal scale)."""
+    values, vectors = eigh(h, subset_by_index=[0, 0], check_finite=False)
+    return float(values[0]), vectors[:, 0], np.max(np.abs(np.diag(h)))
 
 
 def _blas_threads(size):
@@ -249,10 +275,13 @@ def _minimise(problem, x, tol, max_iterations, time_limit_s):
         if biggest > MAX_STEP_RAD and not problem.linear:  # a quadratic needs no cap
             step *= MAX_STEP_RAD / biggest
         u0, slope = problem.energy(x), float(g @ step)
-        alpha = 1.0
+        alpha, contact = 1.0, None
         while alpha > 1e-12:
             trial = x + alpha * step
-            u = problem.energy(trial)
+            try:
+                u = problem.energy(trial)
+            except Contact as exc:  # not a place the rod can be: step shorter
+                u, contact = np.inf, exc
             if u <= u0 + 1e-4 * alpha * slope:
                 break
             if abs(u - u0) <= 1e-13 * abs(u0) and np.max(np.abs(
@@ -262,13 +291,13 @@ def _minimise(problem, x, tol, max_iterations, time_limit_s):
         else:
             if residual <= 1e3 * tol:
                 return x, 'converged (at round-off)', iterations, residual, None
-            return x, f'line search failed (residual {residual:.3g})', iterations, \
-                residual, None
+            return x, f'line search failed (residual {residual:.3g})' + (
+                f': {contact}' if contact else ''), iterations, residual, None
         x = trial
 
 
 def solve(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=1, initial=None, tol=1e-9,
-          max_iterations=500, time_limit_s=10.0, linear=False):
+          max_iterations=500, time_limit_s=10.0, linear=False, dipoles=False):
     """
     Return the Equilibrium of a chain.
 
@@ -282,7 +311,10 @@ def solve(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=1, initial=None, tol
     :param linear: small-angle model: the energy's quadratic Taylor model about the straight
         state and linearised kinematics, one linear solve; no minimum exists when a magnet
         is at an obtuse angle to the field, and the result says so
-    :raises ValueError: non-finite field or gravity, an initial state of the wrong shape
+    :param dipoles: magnet-to-magnet interaction: every link is a point dipole at its centre
+        acting on the links of other segments (a segment is one magnet)
+    :raises ValueError: non-finite field or gravity, an initial state of the wrong shape,
+        the planar linearised model with dipoles (use dof 3)
     """
     n = chain.size
     if dof not in (1, 3):
@@ -297,32 +329,46 @@ def solve(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=1, initial=None, tol
         return Equilibrium(np.zeros((0,) if dof == 1 else (0, 3)),
                            chain.base_position_m[None, :].copy(), True, 'nothing inserted',
                            0, 0.0, np.inf, 0.0)  # no degree of freedom: vacuously stable
+    pairs = chain.interacting_pairs() if dipoles else None
     if dof == 1:
-        problem = _Planar(chain, field_t, gravity_m_s2, linear)
+        if linear and dipoles:
+            raise ValueError('the planar linearised model has no dipole interaction: use dof 3')
+        problem = _Planar(chain, field_t, gravity_m_s2, linear, pairs)
     else:
-        problem = (_SpatialLinear if linear else _Spatial)(chain, field_t, gravity_m_s2)
+        problem = (_SpatialLinear if linear else _Spatial)(chain, field_t, gravity_m_s2,
+                                                           pairs)
     shape = (n,) if dof == 1 else (n, 3)
     x = np.zeros(shape) if initial is None else np.array(initial, dtype=float)
     if x.shape != shape or not np.all(np.isfinite(x)):
         raise ValueError(f'initial angles must be finite numbers of shape {shape}')
-    if linear:
+    dense = dof == 3 or problem.pairs is not None
+    with _blas_threads(problem.size if dense else np.inf):
+        try:
+            return _solve(problem, x.reshape(-1), shape, tol, max_iterations, time_limit_s)
+        except Contact as exc:  # the start itself has two magnets in one place
+            return Equilibrium(np.full(shape, np.nan), np.full((n + 1, 3), np.nan), False,
+                               f'start state: {exc}', 0, np.nan, np.nan, np.nan)
+
+
+def _solve(problem, x, shape, tol, max_iterations, time_limit_s):
+    """Return the Equilibrium of a problem from x (see solve)."""
+    points_shape = (problem.chain.size + 1, 3)
+    if problem.linear:
         # The small-angle energy is quadratic: without a positive definite Hessian it has
         # no minimum at all, and descending it would run off to infinity.
         lowest = problem.smallest_eigen(x)[0]
         if lowest <= 0:
-            return Equilibrium(np.full(shape, np.nan), np.full((n + 1, 3), np.nan), False,
+            return Equilibrium(np.full(shape, np.nan), np.full(points_shape, np.nan), False,
                                'linearised model has no minimum (Hessian not positive '
                                'definite)', 0, np.nan, lowest, np.nan)
-    x = x.reshape(-1)
     problem.gradient(x)  # the first 3-DoF evaluation in a process compiles: not on the clock
-    with _blas_threads(problem.size if dof == 3 else np.inf):
-        x, reason, iterations, residual, stability = _minimise(problem, x, tol,
-                                                               max_iterations, time_limit_s)
-        if not np.all(np.isfinite(x)):
-            return Equilibrium(np.full(shape, np.nan), np.full((n + 1, 3), np.nan), False,
-                               reason, iterations, residual, np.nan, np.nan)
-        if stability is None:
-            stability = problem.smallest_eigen(x)[0]
+    x, reason, iterations, residual, stability = _minimise(problem, x, tol, max_iterations,
+                                                           time_limit_s)
+    if not np.all(np.isfinite(x)):
+        return Equilibrium(np.full(shape, np.nan), np.full(points_shape, np.nan), False,
+                           reason, iterations, residual, np.nan, np.nan)
+    if stability is None:
+        stability = problem.smallest_eigen(x)[0]
     angles, points = problem.result(x)
     return Equilibrium(angles, points, reason.startswith('converged'), reason, iterations,
                        residual, stability, float(problem.energy(x)))

@@ -32,6 +32,8 @@ def build_parser():
                         help='joint degrees of freedom: 1 planar, 3 bend-bend-twist')
     parser.add_argument('--gravity', nargs=3, type=float, default=(0.0, 0.0, 0.0),
                         metavar=('GX', 'GY', 'GZ'), help='gravity, m/s^2 (default none)')
+    parser.add_argument('--dipoles', action='store_true',
+                        help='magnet-to-magnet (dipole-dipole) interaction between segments')
     parser.add_argument('--linear', action='store_true',
                         help='small-angle (linearised) model: one linear solve')
     parser.add_argument('--json', action='store_true', help='print one JSON object')
@@ -44,13 +46,15 @@ def main(args=None):
     try:
         spec = load_tentacle(opts.tentacle)
         chain = discretise(spec, opts.inserted, opts.sublinks)
-        eq = solve(chain, opts.field, opts.gravity, dof=opts.dof, linear=opts.linear)
+        eq = solve(chain, opts.field, opts.gravity, dof=opts.dof, linear=opts.linear,
+                   dipoles=opts.dipoles)
     except (SpecError, ValueError) as exc:
         print(f'tentacle-statics: {exc}', file=sys.stderr)
         return 2
     result = {
         'tentacle': spec.name, 'field_t': list(opts.field), 'inserted_m': float(
             chain.lengths_m.sum()), 'links': chain.size, 'dof': opts.dof,
+        'dipoles': opts.dipoles, 'linear': opts.linear,
         'tip': eq.tip_m.tolist(), 'heading': eq.heading.tolist(),
         'converged': eq.converged, 'reason': eq.reason, 'iterations': eq.iterations,
         'residual': eq.residual,

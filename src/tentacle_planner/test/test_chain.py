@@ -32,3 +32,18 @@ def test_partial_insertion_keeps_the_distal_part(cantilever):
 def test_bad_knobs_raise(cantilever, kwargs, message):
     with pytest.raises(ValueError, match=message):
         discretise(cantilever[0], **kwargs)
+
+
+def test_links_know_their_segment_and_which_pairs_interact(braided):
+    chain = discretise(braided, sublinks=3)
+    np.testing.assert_array_equal(chain.segment_index, np.repeat(np.arange(5), 3))
+    i, j = chain.interacting_pairs()
+    assert len(i) == 15 * 14 // 2 - 5 * 3  # all pairs but the three within each segment
+    assert np.all(chain.segment_index[i] != chain.segment_index[j])
+    radius = np.sqrt(braided.segments[0].area_m2 / np.pi)
+    np.testing.assert_allclose(chain.radii_m, radius)
+    limits = chain.contact_distances((i, j))
+    far = np.abs(i - j) > 1
+    np.testing.assert_allclose(limits[far], 2 * radius)  # magnets' surfaces touch
+    # Neighbours across a segment boundary: half their distance when straight, at most.
+    assert np.all(limits[~far] <= 0.5 * chain.lengths_m[0] * (1 + 1e-12))

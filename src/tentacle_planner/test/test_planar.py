@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from tentacle_planner import planar
+from tentacle_planner import dipoles, planar
 from tentacle_planner.chain import Chain
 
 
@@ -43,3 +43,34 @@ def test_gravity_energy_is_the_height_of_the_centres_of_mass():
     elastic = 0.5 * np.dot(chain.stiffness_n_m[:, 0], np.diff(theta, prepend=0.0) ** 2)
     expected = elastic + np.sum(chain.masses_kg * 9.81 * centres[:, 1])
     assert planar.energy(theta, chain.stiffness_n_m[:, 0], a, b) == pytest.approx(expected)
+
+
+def test_dipole_interaction_derivatives_match_finite_differences():
+    rng = np.random.default_rng(3)
+    n = 6
+    rotation = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    chain = Chain(rng.uniform(1e-3, 5e-3, n), np.zeros((n, 3)), rng.normal(0, 1e-3, (n, 3)),
+                  np.zeros(n), np.zeros(n), rng.normal(size=3), rotation,
+                  np.array([0, 0, 1, 1, 2, 3]))
+    pairs = chain.interacting_pairs()
+    theta = rng.uniform(-2, 2, n)
+    energy, grad, hess = planar.interaction(chain, theta, pairs)
+    # The energy itself, from the world-frame points of planar.points.
+    pts = planar.points(chain, theta)
+    def turn(t):
+        return np.array([[np.cos(t), -np.sin(t), 0.0], [np.sin(t), np.cos(t), 0.0],
+                         [0.0, 0.0, 1.0]])
+
+    world = [chain.base_rotation @ turn(t) @ m for t, m in zip(theta, chain.moments_a_m2)]
+    reference = dipoles.interaction(np.array(world), (pts[:-1] + pts[1:]) / 2, pairs, False)
+    assert energy == pytest.approx(reference.energy_j, rel=1e-12)
+    eps = 1e-4
+    eye = np.eye(n)
+    fd_grad = [(planar.interaction(chain, theta + eps * e, pairs, False)[0]
+                - planar.interaction(chain, theta - eps * e, pairs, False)[0]) / (2 * eps)
+               for e in eye]
+    np.testing.assert_allclose(grad, fd_grad, rtol=1e-6, atol=1e-7 * np.abs(fd_grad).max())
+    fd_hess = np.array([(planar.interaction(chain, theta + eps * e, pairs, False)[1]
+                         - planar.interaction(chain, theta - eps * e, pairs, False)[1])
+                        / (2 * eps) for e in eye])
+    np.testing.assert_allclose(hess, fd_hess, rtol=1e-5, atol=1e-6 * np.abs(fd_hess).max())

@@ -1,5 +1,7 @@
 """3-DoF joints: exact derivatives, and agreement with the planar model in the plane."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from tentacle_planner import spatial
@@ -68,3 +70,32 @@ def test_out_of_plane_field_bends_out_of_plane(cantilever):
     in_plane = solve(chain, [0.0, 5e-3, 0.0], dof=1)  # the same problem, turned by 90 deg
     assert eq.converged
     np.testing.assert_allclose(eq.tip_m, in_plane.tip_m[[0, 2, 1]], atol=1e-9)
+
+
+@pytest.mark.parametrize('seed', range(2))
+def test_dipole_interaction_derivatives_match_finite_differences(seed):
+    chain, rng = random_chain(5, seed)
+    # Soft joints and strong magnets: the interaction is a large part of the Hessian.
+    chain = dataclasses.replace(chain, moments_a_m2=rng.normal(0, 1e-3, (5, 3)),
+                                stiffness_n_m=1e-3 * chain.stiffness_n_m,
+                                segment_index=np.array([0, 0, 1, 2, 2]))
+    pairs = chain.interacting_pairs()
+    q = rng.uniform(-1, 1, (5, 3))
+    field, gravity = rng.normal(0, 1e-4, 3), np.zeros(3)
+
+    def state(q, hessian=False):
+        return spatial.evaluate(chain, q, field, gravity, hessian=hessian, pairs=pairs)
+
+    plain = spatial.evaluate(chain, q, field, gravity)
+    full = state(q, True)
+    assert np.abs(full.hessian - plain.hessian).max() > 0.1 * np.abs(plain.hessian).max()
+    eps = 1e-4  # the pair energies cancel to a few digits: round-off rules below this
+    basis = np.eye(15).reshape(15, 5, 3)
+    fd_grad = np.array([(state(q + eps * e).energy_j - state(q - eps * e).energy_j)
+                        / (2 * eps) for e in basis]).reshape(5, 3)
+    np.testing.assert_allclose(full.gradient, fd_grad, rtol=1e-6,
+                               atol=1e-7 * np.abs(fd_grad).max())
+    fd_hess = np.column_stack([((state(q + eps * e).gradient - state(q - eps * e).gradient)
+                                / (2 * eps)).reshape(-1) for e in basis])
+    np.testing.assert_allclose(full.hessian, fd_hess, rtol=1e-5,
+                               atol=1e-6 * np.abs(fd_hess).max())

@@ -17,6 +17,7 @@ with a_i = m_x B_x + m_y B_y + W_i h_i g_x and b_i = m_x B_y - m_y B_x + W_i h_i
 W_i = (mass distal of link i) + (half of link i's mass).
 """
 
+import numba
 import numpy as np
 from tentacle_planner import dipoles
 
@@ -38,37 +39,73 @@ def loads(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0)):
     return mx * bx + my * by + lever * gx, mx * by - my * bx + lever * gy
 
 
+def joint_angles(theta):
+    """Return q_i = theta_i - theta_{i-1} (n,), rad (np.diff with prepend costs 10x more)."""
+    q = theta.copy()
+    q[1:] -= theta[:-1]
+    return q
+
+
+@numba.njit(cache=True)
+def evaluate(theta, k, a, b, linear=False, derivatives=True):
+    """
+    Return (energy J, dU/dtheta (n,) N m, Hessian in upper banded form (2, n)) in one pass.
+
+    The banded form is scipy.linalg.solveh_banded's: row 1 the diagonal, row 0 (from column
+    1) the superdiagonal. linear: the small-angle model, sin t ~ t and cos t ~ 1 - t^2 / 2.
+    Without derivatives the gradient and Hessian are left zero (a line search's trial).
+    """
+    n = len(theta)
+    energy = 0.0
+    grad = np.zeros(n)
+    banded = np.zeros((2, n))
+    previous = 0.0
+    for i in range(n):
+        t = theta[i]
+        dq = t - previous
+        previous = t
+        energy += 0.5 * k[i] * dq * dq
+        if linear:
+            energy -= a[i] * (1.0 - 0.5 * t * t) + b[i] * t
+        else:
+            c, s = np.cos(t), np.sin(t)
+            energy -= a[i] * c + b[i] * s
+        if not derivatives:
+            continue
+        torque = k[i] * dq  # elastic torque at joint i: acts on links i and i - 1
+        grad[i] += torque
+        banded[1, i] += k[i]
+        if i > 0:
+            grad[i - 1] -= torque
+            banded[1, i - 1] += k[i]
+            banded[0, i] = -k[i]
+        if linear:
+            grad[i] += a[i] * t - b[i]
+            banded[1, i] += a[i]
+        else:
+            grad[i] += a[i] * s - b[i] * c
+            banded[1, i] += a[i] * c + b[i] * s
+    return energy, grad, banded
+
+
 def energy(theta, k, a, b):
     """Return the total potential energy, J."""
-    dq = np.diff(theta, prepend=0.0)
-    return 0.5 * np.dot(k, dq * dq) - np.dot(a, np.cos(theta)) - np.dot(b, np.sin(theta))
+    return evaluate(theta, k, a, b, False, False)[0]
 
 
 def gradient(theta, k, a, b):
     """Return dU/dtheta (n,), N m."""
-    torque = k * np.diff(theta, prepend=0.0)       # elastic torque at each joint
-    g = torque.copy()
-    g[:-1] -= torque[1:]
-    return g + a * np.sin(theta) - b * np.cos(theta)
+    return evaluate(theta, k, a, b)[1]
 
 
 def hessian_banded(theta, k, a, b):
-    """
-    Return the Hessian in upper banded form (2, n) for scipy.linalg.solveh_banded.
-
-    Row 1 is the diagonal, row 0 (from column 1) the superdiagonal.
-    """
-    diag = k + a * np.cos(theta) + b * np.sin(theta)
-    diag[:-1] += k[1:]
-    banded = np.zeros((2, len(theta)))
-    banded[1] = diag
-    banded[0, 1:] = -k[1:]
-    return banded
+    """Return the Hessian in upper banded form (2, n) (see evaluate)."""
+    return evaluate(theta, k, a, b)[2]
 
 
-def hessian_dense(theta, k, a, b):
+def hessian_dense(theta, k, a, b, linear=False):
     """Return the Hessian as a dense (n, n) array (for tests and small chains)."""
-    banded = hessian_banded(theta, k, a, b)
+    banded = evaluate(theta, k, a, b, linear)[2]
     return np.diag(banded[1]) + np.diag(banded[0, 1:], 1) + np.diag(banded[0, 1:], -1)
 
 
@@ -125,21 +162,12 @@ def interaction(chain, theta, pairs, hessian=True, contact_m=None):
 # -- linearised small-angle model: sin t ~ t, cos t ~ 1 - t^2 / 2 in loads and kinematics ----
 def energy_linear(theta, k, a, b):
     """Return the small-angle energy, J (quadratic in theta)."""
-    dq = np.diff(theta, prepend=0.0)
-    return 0.5 * np.dot(k, dq * dq) - np.dot(a, 1.0 - 0.5 * theta * theta) - np.dot(b, theta)
+    return evaluate(theta, k, a, b, True, False)[0]
 
 
 def gradient_linear(theta, k, a, b):
     """Return the small-angle dU/dtheta (n,), N m."""
-    torque = k * np.diff(theta, prepend=0.0)
-    g = torque.copy()
-    g[:-1] -= torque[1:]
-    return g + a * theta - b
-
-
-def hessian_banded_linear(theta, k, a, b):
-    """Return the (constant) small-angle Hessian in upper banded form (2, n)."""
-    return hessian_banded(np.zeros_like(theta), k, a, np.zeros_like(b))
+    return evaluate(theta, k, a, b, True)[1]
 
 
 def points_linear(chain, theta):

@@ -20,7 +20,7 @@ import time
 
 import numpy as np
 from scipy.linalg import eigh, eigh_tridiagonal, LinAlgError, solveh_banded
-from scipy.linalg.lapack import dpotrf as potrf, dpotrs as potrs
+from scipy.linalg.lapack import dpotrf as potrf, dpotrs as potrs, dptsv as ptsv
 from tentacle_planner import planar, spatial
 from tentacle_planner.dipoles import Contact
 from threadpoolctl import ThreadpoolController
@@ -71,51 +71,60 @@ class _Planar:
         # Interacting dipoles couple every link with every other: a dense Hessian.
         self.pairs = pairs if pairs is not None and len(pairs[0]) else None
         self.contact_m = None if self.pairs is None else chain.contact_distances(pairs)
-        if linear:
-            self._energy, self._gradient = planar.energy_linear, planar.gradient_linear
-            self._hessian, self._points = planar.hessian_banded_linear, planar.points_linear
-        else:
-            self._energy, self._gradient = planar.energy, planar.gradient
-            self._hessian, self._points = planar.hessian_banded, planar.points
-        self.k = chain.stiffness_n_m[:, 0]
+        self.k = chain.stiffness_n_m[:, 0].copy()
         self.a, self.b = planar.loads(chain, field_t, gravity_m_s2)
         self.load_scale = np.max(np.abs(self.a) + np.abs(self.b))
         self.size = chain.size
+        self._key, self._value = None, None
 
-    def interaction(self, x, hessian=False):
-        return planar.interaction(self.chain, x, self.pairs, hessian, self.contact_m)
+    def evaluate(self, x):
+        """Return (energy, gradient, banded Hessian) at x, remembering the last one."""
+        # The minimiser never changes an array in place: the same object is the same point.
+        if x is not self._key:
+            u, g, banded = planar.evaluate(x, self.k, self.a, self.b, self.linear)
+            if self.pairs is not None:
+                du, dg, _ = planar.interaction(self.chain, x, self.pairs, False, self.contact_m)
+                u, g = u + du, g + dg
+            self._key, self._value = x, (u, g, banded)
+        return self._value
 
     def energy(self, x):
-        u = self._energy(x, self.k, self.a, self.b)
-        return u if self.pairs is None else u + self.interaction(x)[0]
+        if x is self._key:
+            return self._value[0]
+        u = planar.evaluate(x, self.k, self.a, self.b, self.linear, False)[0]
+        return u if self.pairs is None else u + planar.interaction(
+            self.chain, x, self.pairs, False, self.contact_m)[0]
 
     def gradient(self, x):
-        g = self._gradient(x, self.k, self.a, self.b)
-        return g if self.pairs is None else g + self.interaction(x)[1]
+        return self.evaluate(x)[1]
 
     def dense_hessian(self, x):
-        h = planar.hessian_dense(x, self.k, self.a, self.b)
-        return h + self.interaction(x, True)[2]
+        banded = self.evaluate(x)[2]
+        h = np.diag(banded[1]) + np.diag(banded[0, 1:], 1) + np.diag(banded[0, 1:], -1)
+        return h + planar.interaction(self.chain, x, self.pairs, True, self.contact_m)[2]
 
     def torque_scale(self, x):
-        return max(self.load_scale, np.max(np.abs(self.k * np.diff(x, prepend=0.0))),
+        return max(self.load_scale, np.max(np.abs(self.k * planar.joint_angles(x))),
                    1e-9 * np.max(self.k), 1e-300)
 
     def newton_step(self, x, g):
         if self.pairs is not None:
             return _dense_newton_step(self.dense_hessian(x), g)
-        banded = self._hessian(x, self.k, self.a, self.b)
-        if self.size == 1:  # LAPACK's banded solver needs two
-            curvature = banded[1, 0]
-            scale = max(abs(curvature), 1e-300)
-            return -g / (curvature if curvature > 0 else abs(curvature) + 1e-8 * scale)
+        banded = self.evaluate(x)[2]
+        diagonal = banded[1]
+        if self.size == 1:  # LAPACK's tridiagonal solvers need two
+            scale = max(abs(diagonal[0]), 1e-300)
+            return -g / (diagonal[0] if diagonal[0] > 0 else abs(diagonal[0]) + 1e-8 * scale)
+        step, info = ptsv(diagonal, banded[0, 1:], -g)[2:]  # positive definite: plain Newton
+        if info == 0:
+            return step
         return _shifted_solve(lambda shift: solveh_banded(
-            banded + np.array([[0.0], [shift]]), g, check_finite=False), banded[1], g)
+            banded + np.array([[0.0], [shift]]), g, check_finite=False), diagonal, g)
 
     def smallest_eigen(self, x):
         if self.pairs is not None:
             return _dense_smallest_eigen(self.dense_hessian(x))
-        banded = self._hessian(x, self.k, self.a, self.b)
+        banded = self.evaluate(x)[2]
         if self.size == 1:
             return float(banded[1, 0]), np.ones(1), abs(banded[1, 0])
         values, vectors = eigh_tridiagonal(banded[1], banded[0, 1:], select='i',
@@ -123,7 +132,7 @@ class _Planar:
         return float(values[0]), vectors[:, 0], np.max(np.abs(banded[1]))
 
     def result(self, x):
-        return x, self._points(self.chain, x)
+        return x, (planar.points_linear if self.linear else planar.points)(self.chain, x)
 
 
 class _Spatial:

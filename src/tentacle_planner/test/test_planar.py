@@ -57,6 +57,7 @@ def test_dipole_interaction_derivatives_match_finite_differences():
     energy, grad, hess = planar.interaction(chain, theta, pairs)
     # The energy itself, from the world-frame points of planar.points.
     pts = planar.points(chain, theta)
+
     def turn(t):
         return np.array([[np.cos(t), -np.sin(t), 0.0], [np.sin(t), np.cos(t), 0.0],
                          [0.0, 0.0, 1.0]])

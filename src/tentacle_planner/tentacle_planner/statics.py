@@ -74,6 +74,7 @@ class _Planar:
         self.k = chain.stiffness_n_m[:, 0].copy()
         self.a, self.b = planar.loads(chain, field_t, gravity_m_s2)
         self.load_scale = np.max(np.abs(self.a) + np.abs(self.b))
+        self.k_floor = max(1e-9 * np.max(self.k), 1e-300)
         self.size = chain.size
         self._key, self._value = None, None
 
@@ -104,8 +105,8 @@ class _Planar:
         return h + planar.interaction(self.chain, x, self.pairs, True, self.contact_m)[2]
 
     def torque_scale(self, x):
-        return max(self.load_scale, np.max(np.abs(self.k * planar.joint_angles(x))),
-                   1e-9 * np.max(self.k), 1e-300)
+        return max(self.load_scale, np.abs(self.k * planar.joint_angles(x)).max(),
+                   self.k_floor)
 
     def newton_step(self, x, g):
         if self.pairs is not None:
@@ -125,11 +126,13 @@ class _Planar:
         if self.pairs is not None:
             return _dense_smallest_eigen(self.dense_hessian(x))
         banded = self.evaluate(x)[2]
-        if self.size == 1:
-            return float(banded[1, 0]), np.ones(1), abs(banded[1, 0])
-        values, vectors = eigh_tridiagonal(banded[1], banded[0, 1:], select='i',
-                                           select_range=(0, 0))
-        return float(values[0]), vectors[:, 0], np.max(np.abs(banded[1]))
+        diagonal, off = banded[1], banded[0, 1:]
+        value = float(planar.smallest_eigenvalue(diagonal, off))
+        mode = None  # the minimiser needs the mode only to leave a saddle
+        if value < 0:
+            mode = np.ones(1) if self.size == 1 else eigh_tridiagonal(
+                diagonal, off, select='i', select_range=(0, 0))[1][:, 0]
+        return value, mode, np.max(np.abs(diagonal))
 
     def result(self, x):
         return x, (planar.points_linear if self.linear else planar.points)(self.chain, x)
@@ -259,7 +262,7 @@ def _minimise(problem, x, tol, max_iterations, time_limit_s):
     iterations = escapes = 0
     while True:
         g = problem.gradient(x)
-        residual = float(np.max(np.abs(g)) / problem.torque_scale(x))
+        residual = float(np.abs(g).max() / problem.torque_scale(x))
         if not np.isfinite(residual):
             return x, 'non-finite gradient', iterations, residual, None
         if residual <= tol:
@@ -280,7 +283,7 @@ def _minimise(problem, x, tol, max_iterations, time_limit_s):
                 residual, None
         iterations += 1
         step = problem.newton_step(x, g)
-        biggest = np.max(np.abs(step))
+        biggest = np.abs(step).max()
         if biggest > MAX_STEP_RAD and not problem.linear:  # a quadratic needs no cap
             step *= MAX_STEP_RAD / biggest
         u0, slope = problem.energy(x), float(g @ step)

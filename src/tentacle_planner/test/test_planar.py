@@ -75,3 +75,24 @@ def test_dipole_interaction_derivatives_match_finite_differences():
                          - planar.interaction(chain, theta - eps * e, pairs, False)[1])
                         / (2 * eps) for e in eye])
     np.testing.assert_allclose(hess, fd_hess, rtol=1e-5, atol=1e-6 * np.abs(fd_hess).max())
+
+
+@pytest.mark.parametrize('n', [1, 2, 7, 300])
+def test_smallest_eigenvalue_by_bisection_matches_lapack(n):
+    from scipy.linalg import eigvalsh_tridiagonal
+    rng = np.random.default_rng(n)
+    for scale in (1e-6, 1.0, 1e4):
+        diagonal, off = scale * rng.normal(size=n), scale * rng.normal(size=n - 1)
+        expected = np.linalg.eigvalsh(np.diag(diagonal) + np.diag(off, 1) + np.diag(off, -1))[0]
+        if n > 1:
+            assert expected == pytest.approx(eigvalsh_tridiagonal(diagonal, off)[0],
+                                             rel=1e-12)
+        assert planar.smallest_eigenvalue(diagonal, off) == pytest.approx(
+            expected, rel=1e-12, abs=1e-14 * scale)
+    # A stiff chain with a soft mode: k from 1e-3 to 1e6, a near-singular minimum.
+    k = 10.0 ** rng.uniform(-3, 6, n)
+    banded = planar.hessian_banded(np.zeros(n), k, np.zeros(n), np.zeros(n))
+    dense = planar.hessian_dense(np.zeros(n), k, np.zeros(n), np.zeros(n))
+    # Both are accurate to round-off of the matrix's norm, not of the small eigenvalue.
+    assert planar.smallest_eigenvalue(banded[1], banded[0, 1:]) == pytest.approx(
+        np.linalg.eigvalsh(dense)[0], rel=0, abs=1e-14 * np.max(banded[1]))

@@ -57,6 +57,7 @@ class Evaluation:
     hessian: np.ndarray         # (3n, 3n), N m / rad^2, flattened (joint, angle); or None
     distal_moments: np.ndarray  # (n, 3) V_J, A m^2
     torques: np.ndarray         # (n, 3) T_J = V_J x B + W_J x g, N m
+    largest_torque_n_m: float   # max over joints of |T_J| and of the elastic |k q|
 
 
 def evaluate(chain, q, field_t, gravity_m_s2=(0.0, 0.0, 0.0), hessian=True, levers=None,
@@ -78,7 +79,7 @@ def evaluate(chain, q, field_t, gravity_m_s2=(0.0, 0.0, 0.0), hessian=True, leve
                     chain.base_position_m, chain.lengths_m, chain.moments_a_m2, levers,
                     chain.stiffness_n_m, np.asarray(field_t, dtype=float),
                     np.asarray(gravity_m_s2, dtype=float), hessian)
-    rotations, axes, points_m, energy_j, grad, hess, distal, torques = out
+    rotations, axes, points_m, energy_j, grad, hess, distal, torques, largest = out
     if pairs is not None and len(pairs[0]):
         moments = (rotations @ chain.moments_a_m2[:, :, None])[:, :, 0]
         centres = points_m[:-1] + 0.5 * chain.lengths_m[:, None] * rotations[:, :, 0]
@@ -90,7 +91,7 @@ def evaluate(chain, q, field_t, gravity_m_s2=(0.0, 0.0, 0.0), hessian=True, leve
         if hessian:
             hess = hess + d_hess
     return Evaluation(rotations, axes, points_m, energy_j, grad, hess if hessian else None,
-                      distal, torques)
+                      distal, torques, largest)
 
 
 def _project_link_loads(axes, joints, moments, centres, loads, hessian):
@@ -207,8 +208,12 @@ def _evaluate(q, base_rotation, base_position, lengths, moments, levers, stiffne
         torques[i, 1] = V[2] * field[0] - V[0] * field[2] + W[2] * gravity[0] - W[0] * gravity[2]
         torques[i, 2] = V[0] * field[1] - V[1] * field[0] + W[0] * gravity[1] - W[1] * gravity[0]
     grad = np.empty((n, 3))
+    largest = 0.0
     for i in range(n):
+        T = torques[i]
+        largest = max(largest, np.sqrt(T[0] * T[0] + T[1] * T[1] + T[2] * T[2]))
         for c in range(3):
+            largest = max(largest, abs(stiffness[i, c] * q[i, c]))
             a = axes[i, c]
             grad[i, c] = stiffness[i, c] * q[i, c] - (a[0] * torques[i, 0] + a[1] * torques[i, 1]
                                                       + a[2] * torques[i, 2])
@@ -236,4 +241,4 @@ def _evaluate(q, base_rotation, base_position, lengths, moments, levers, stiffne
                 hess[e, f] = value
                 hess[f, e] = value
             hess[e, e] += stiffness[j, e % 3]
-    return rotations, axes, points, energy, grad, hess, distal_v, torques
+    return rotations, axes, points, energy, grad, hess, distal_v, torques, largest

@@ -22,6 +22,7 @@ import numpy as np
 from scipy.linalg import eigh, eigh_tridiagonal, LinAlgError, solveh_banded
 from scipy.linalg.lapack import dpotrf as potrf, dpotrs as potrs, dptsv as ptsv
 from tentacle_planner import planar, spatial
+from tentacle_planner.chain import Chain
 from tentacle_planner.dipoles import Contact
 from threadpoolctl import ThreadpoolController
 
@@ -33,6 +34,7 @@ ESCAPE_STEP_RAD = 0.05
 # the arithmetic); past it the threads pay for themselves.
 SINGLE_THREAD_MAX_SIZE = 600
 _BLAS = []  # the ThreadpoolController, made on first use (it inspects the loaded libraries)
+_COMPILED = []  # [True] once the compiled passes are ready (solve keeps them off its clock)
 
 
 @dataclass(frozen=True)
@@ -149,6 +151,7 @@ class _Spatial:
         self.contact_m = None if pairs is None else chain.contact_distances(pairs)
         self.levers = spatial.gravity_levers(chain)
         self.size = 3 * chain.size
+        self.k_floor = max(1e-9 * np.max(chain.stiffness_n_m), 1e-300)
         self._key, self._value = None, None
 
     def evaluate(self, x, hessian=True):
@@ -169,10 +172,7 @@ class _Spatial:
         return self.evaluate(x).gradient.reshape(-1)
 
     def torque_scale(self, x):
-        value = self.evaluate(x)
-        return max(np.sqrt(np.max(np.sum(value.torques ** 2, axis=1))),
-                   np.max(np.abs(self.chain.stiffness_n_m.reshape(-1) * x)),
-                   1e-9 * np.max(self.chain.stiffness_n_m), 1e-300)
+        return max(self.evaluate(x).largest_torque_n_m, self.k_floor)
 
     def newton_step(self, x, g):
         return _dense_newton_step(self.evaluate(x).hessian, g)
@@ -233,6 +233,18 @@ def _dense_smallest_eigen(h):
     """Return (smallest eigenvalue, its eigenvector, the Hessian's diagonal scale)."""
     values, vectors = eigh(h, subset_by_index=[0, 0], check_finite=False)
     return float(values[0]), vectors[:, 0], np.max(np.abs(np.diag(h)))
+
+
+def _compile_kernels():
+    """Compile (or load from numba's cache) the compiled passes, once per process."""
+    if _COMPILED:
+        return
+    one = np.ones(1)
+    planar.evaluate(one, one, one, one)
+    planar.smallest_eigenvalue(one, np.zeros(0))
+    chain = Chain(one, np.ones((1, 3)), np.ones((1, 3)), one, one, np.zeros(3), np.eye(3))
+    spatial.evaluate(chain, np.zeros((1, 3)), np.zeros(3))
+    _COMPILED.append(True)
 
 
 def _blas_threads(size):
@@ -341,6 +353,7 @@ def solve(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=1, initial=None, tol
         return Equilibrium(np.zeros((0,) if dof == 1 else (0, 3)),
                            chain.base_position_m[None, :].copy(), True, 'nothing inserted',
                            0, 0.0, np.inf, 0.0)  # no degree of freedom: vacuously stable
+    _compile_kernels()  # seconds on a fresh machine, not to be charged to a solve's limit
     pairs = chain.interacting_pairs() if dipoles else None
     if dof == 1:
         if linear and dipoles:
@@ -373,7 +386,6 @@ def _solve(problem, x, shape, tol, max_iterations, time_limit_s):
             return Equilibrium(np.full(shape, np.nan), np.full(points_shape, np.nan), False,
                                'linearised model has no minimum (Hessian not positive '
                                'definite)', 0, np.nan, lowest, np.nan)
-    problem.gradient(x)  # the first 3-DoF evaluation in a process compiles: not on the clock
     x, reason, iterations, residual, stability = _minimise(problem, x, tol, max_iterations,
                                                            time_limit_s)
     if not np.all(np.isfinite(x)):

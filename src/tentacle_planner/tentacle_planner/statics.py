@@ -83,8 +83,9 @@ class _Planar:
     def evaluate(self, x):
         """Return (energy, gradient, banded Hessian) at x, remembering the last one."""
         # The minimiser never changes an array in place: the same object is the same point.
+        # A line search's trial is evaluated in full: it is usually the next iterate.
         if x is not self._key:
-            u, g, banded = planar.evaluate(x, self.k, self.a, self.b, self.linear)
+            u, g, banded = planar.evaluate(x, self.k, self.a, self.b, self.linear, True)
             if self.pairs is not None:
                 du, dg, _ = planar.interaction(self.chain, x, self.pairs, False, self.contact_m)
                 u, g = u + du, g + dg
@@ -92,11 +93,7 @@ class _Planar:
         return self._value
 
     def energy(self, x):
-        if x is self._key:
-            return self._value[0]
-        u = planar.evaluate(x, self.k, self.a, self.b, self.linear, False)[0]
-        return u if self.pairs is None else u + planar.interaction(
-            self.chain, x, self.pairs, False, self.contact_m)[0]
+        return self.evaluate(x)[0]
 
     def gradient(self, x):
         return self.evaluate(x)[1]
@@ -154,19 +151,19 @@ class _Spatial:
         self.k_floor = max(1e-9 * np.max(chain.stiffness_n_m), 1e-300)
         self._key, self._value = None, None
 
-    def evaluate(self, x, hessian=True):
-        """Return the Evaluation at x, remembering the last full one (Newton asks twice)."""
+    def evaluate(self, x):
+        """Return the Evaluation at x, remembering the last one."""
         # The minimiser never changes an array in place: the same object is the same point.
-        if x is self._key:
-            return self._value
-        value = spatial.evaluate(self.chain, x.reshape(-1, 3), self.field, self.gravity,
-                                 hessian, self.levers, self.pairs, self.contact_m)
-        if hessian:
-            self._key, self._value = x, value
-        return value
+        # A line search's trial is evaluated in full: it is usually the next iterate, and a
+        # second pass over the chain costs more than the Hessian it would save.
+        if x is not self._key:
+            self._key, self._value = x, spatial.evaluate(
+                self.chain, x.reshape(-1, 3), self.field, self.gravity, True, self.levers,
+                self.pairs, self.contact_m)
+        return self._value
 
     def energy(self, x):
-        return self.evaluate(x, hessian=False).energy_j
+        return self.evaluate(x).energy_j
 
     def gradient(self, x):
         return self.evaluate(x).gradient.reshape(-1)
@@ -240,7 +237,7 @@ def _compile_kernels():
     if _COMPILED:
         return
     one = np.ones(1)
-    planar.evaluate(one, one, one, one)
+    planar.evaluate(one, one, one, one, False, True)
     planar.smallest_eigenvalue(one, np.zeros(0))
     chain = Chain(one, np.ones((1, 3)), np.ones((1, 3)), one, one, np.zeros(3), np.eye(3))
     spatial.evaluate(chain, np.zeros((1, 3)), np.zeros(3))

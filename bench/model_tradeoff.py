@@ -4,13 +4,14 @@ Benchmark: the statics model's speed against its accuracy, and against a Cossera
 
 For standard scenes (the validation cantilever at 90, 135 and 180 degrees to a 5 mT field;
 the chapter 5 braided tentacle fully inserted in an out-of-plane field; the chapter 6 strip
-discretised into 48 links) it solves at every fidelity setting (linearised planar, planar,
-3-DoF; 1 to 64 sub-links per segment) and prints the time per forward solve (median, cold
-start and warm start from a nearby state) beside the tip error against a converged
-reference of the same scene, then writes bench/out/model_tradeoff.png (error against time:
-the Pareto front). The peer, PyElastica with magneto-pyelastica, relaxes the 90 degree
-cantilever with damping; its wall time to come within 1% of L is set beside ours at the
-same accuracy, measured in the same run.
+of 24 segments) it solves at every fidelity setting (linearised and nonlinear, planar and
+3-DoF, with and without magnet-to-magnet interaction; 1 to 64 sub-links per segment) and
+prints the time per forward solve (median, cold start and warm start from a nearby state)
+beside the tip error against a converged reference of the same scene, checks the issue's
+speed targets, then writes bench/out/model_tradeoff.png (error against time: the Pareto
+front). The peer, PyElastica with magneto-pyelastica (bench/peer_elastica.py), relaxes the
+90 degree cantilever with damping; its wall time to settle within 1% of L is set beside
+ours at the same accuracy, timed back to back in the same run.
 
 Run: make bench-model (creates the bench-only .venv-bench with the peer).
 """
@@ -48,7 +49,7 @@ SCENES = {  # name: (tentacle file, field in tesla, models to try, reference set
     'cantilever 180': ('cantilever', field(5e-3, 180), ('planar', '3dof'), ('planar', 1024)),
     'braided 5-link': ('braided_chapter5', np.array([0.0, 0.012, 0.006]),
                        ('linear3', '3dof', '3dof+dip'), ('3dof', 24)),
-    'strip 48-link': ('vsr_chapter6', np.array([0.0, 0.015, 0.0]), ('planar', '3dof'),
+    'chapter 6 strip': ('vsr_chapter6', np.array([0.0, 0.015, 0.0]), ('planar', '3dof'),
                       ('planar', 256)),
 }
 MODELS = {'linear': {'dof': 1, 'linear': True}, 'planar': {'dof': 1}, '3dof': {'dof': 3},

@@ -28,6 +28,9 @@ def build_parser():
     parser.add_argument('--inserted', type=float, default=None, metavar='METRES',
                         help='length pushed past the base (default: all)')
     parser.add_argument('--sublinks', type=int, default=20, help='links per segment')
+    parser.add_argument('--backbone', type=float, default=0.0, metavar='METRES',
+                        help='how far the stiffening backbone reaches past the base '
+                             '(default 0: retracted)')
     parser.add_argument('--dof', type=int, choices=(1, 3), default=1,
                         help='joint degrees of freedom: 1 planar, 3 bend-bend-twist')
     parser.add_argument('--gravity', nargs=3, type=float, default=(0.0, 0.0, 0.0),
@@ -45,7 +48,7 @@ def main(args=None):
     opts = build_parser().parse_args(args)
     try:
         spec = load_tentacle(opts.tentacle)
-        chain = discretise(spec, opts.inserted, opts.sublinks)
+        chain = discretise(spec, opts.inserted, opts.sublinks, opts.backbone)
         eq = solve(chain, opts.field, opts.gravity, dof=opts.dof, linear=opts.linear,
                    dipoles=opts.dipoles)
     except (SpecError, ValueError) as exc:
@@ -54,7 +57,7 @@ def main(args=None):
     result = {
         'tentacle': spec.name, 'field_t': list(opts.field), 'inserted_m': float(
             chain.lengths_m.sum()), 'links': chain.size, 'dof': opts.dof,
-        'dipoles': opts.dipoles, 'linear': opts.linear,
+        'dipoles': opts.dipoles, 'linear': opts.linear, 'backbone_m': opts.backbone,
         'tip': eq.tip_m.tolist(), 'heading': eq.heading.tolist(),
         'converged': eq.converged, 'reason': eq.reason, 'iterations': eq.iterations,
         'residual': eq.residual,

@@ -39,15 +39,15 @@ def assert_sound(eq, started, n_links):
        directions=st.lists(st.sampled_from([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [1, -1, 0],
                                             [0, 0, 1], [-1, 1, 1]]), min_size=4, max_size=4),
        field=st.tuples(*[st.floats(-0.1, 0.1)] * 3), sublinks=st.integers(1, 12),
-       dof=st.sampled_from([1, 3]), inserted=st.floats(0.0, 1.0))
+       dof=st.sampled_from([1, 3]), inserted=st.floats(0.0, 1.0), dipoles=st.booleans())
 def test_any_tentacle_gives_a_finite_state_or_a_reason(lengths, log_moduli, directions, field,
-                                                       sublinks, dof, inserted):
+                                                       sublinks, dof, inserted, dipoles):
     # Stiffness contrasts between neighbours up to 1e9 (issue: 1e-3 .. 1e6 at least).
     spec = parse_tentacle({'segments': [segment(length, 10.0 ** log_e, d) for length, log_e, d
                                         in zip(lengths, log_moduli, directions)]})
     chain = discretise(spec, inserted_m=inserted * spec.length_m, sublinks=sublinks)
     started = time.monotonic()
-    eq = solve(chain, np.array(field), dof=dof, time_limit_s=TIME_LIMIT_S)
+    eq = solve(chain, np.array(field), dof=dof, time_limit_s=TIME_LIMIT_S, dipoles=dipoles)
     assert_sound(eq, started, chain.size)
 
 

@@ -147,6 +147,36 @@ def test_command_line_three_dof_out_of_plane(capsys):
     assert out['converged'] and out['tip'][2] > 0.01 and abs(out['tip'][1]) < 1e-12
 
 
+def test_command_line_knobs(capsys):
+    from tentacle_planner.statics_cli import main
+    tentacles = pathlib.Path(__file__).resolve().parents[3] / 'config/tentacles'
+
+    def run(name, *args):
+        code = main(['--tentacle', str(tentacles / name), '--sublinks', '2', '--json', *args])
+        out = json.loads(capsys.readouterr().out)
+        assert code == 0 and out['converged'], out['reason']
+        return out
+
+    field = ['--field', '0', '0.002', '0.001']
+    plain = run('braided_chapter5.yaml', *field, '--dof', '3')
+    linear = run('braided_chapter5.yaml', *field, '--dof', '3', '--linear')
+    interacting = run('braided_chapter5.yaml', *field, '--dof', '3', '--dipoles')
+    assert linear['linear'] and linear['iterations'] == 1 and interacting['dipoles']
+    assert 1e-4 < np.linalg.norm(np.subtract(interacting['tip'], plain['tip'])) < 2e-3
+    assert 1e-4 < np.linalg.norm(np.subtract(linear['tip'], plain['tip'])) < 5e-3
+    # The chapter 6 strip with its backbone 20 mm out: the first 20 mm barely bend.
+    strip = run('vsr_chapter6.yaml', '--field', '0', '0.01', '0', '--backbone', '0.02')
+    free = run('vsr_chapter6.yaml', '--field', '0', '0.01', '0')
+    assert strip['backbone_m'] == 0.02
+
+    def deflection_of_first_20_mm(out):
+        points = np.array(out['points'])
+        along = np.cumsum(np.r_[0, np.linalg.norm(np.diff(points, axis=0), axis=1)])
+        return np.max(np.abs(points[along <= 0.02 + 1e-9, 1]))
+
+    assert deflection_of_first_20_mm(strip) < deflection_of_first_20_mm(free) / 50
+
+
 def dipole_energy(m1, c1, m2, c2):
     """Textbook energy of two point dipoles, J."""
     r = c2 - c1

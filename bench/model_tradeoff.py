@@ -50,7 +50,7 @@ SCENES = {  # name: (tentacle file, field in tesla, models to try, reference set
     'braided 5-link': ('braided_chapter5', np.array([0.0, 0.012, 0.006]),
                        ('linear3', '3dof', '3dof+dip'), ('3dof', 24)),
     'chapter 6 strip': ('vsr_chapter6', np.array([0.0, 0.015, 0.0]), ('planar', '3dof'),
-                      ('planar', 256)),
+                        ('planar', 256)),
 }
 MODELS = {'linear': {'dof': 1, 'linear': True}, 'planar': {'dof': 1}, '3dof': {'dof': 3},
           'linear3': {'dof': 3, 'linear': True}, '3dof+dip': {'dof': 3, 'dipoles': True}}

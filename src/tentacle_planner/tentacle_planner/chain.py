@@ -31,8 +31,9 @@ class Chain:
     s_start_m: np.ndarray          # (n,) material coordinate of each link's proximal end
     base_position_m: np.ndarray    # (3,)
     base_rotation: np.ndarray      # (3, 3)
-    segment_index: np.ndarray = None  # (n,) which segment (one magnet) each link belongs to
-    radii_m: np.ndarray = None     # (n,) radius of a circle of the section's area
+    segment_index: np.ndarray = None  # (n,) the segment (one magnet) of each link; None:
+    #                                   every link is a magnet of its own
+    radii_m: np.ndarray = None     # (n,) radius of a circle of the section's area (None: 0)
 
     def interacting_pairs(self):
         """Return (i, j) index arrays of the link pairs in different segments (dipoles.py)."""

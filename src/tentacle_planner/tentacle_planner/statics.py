@@ -11,7 +11,9 @@ residual and the stability (the smallest Hessian eigenvalue: negative or near ze
 unstable or at a bifurcation). It never returns NaN silently.
 
 Two joint models share the minimiser: planar 1-DoF joints (planar.py, O(n) per step with
-a tridiagonal Hessian) and 3-DoF bend-bend-twist joints (spatial.py, dense Hessian).
+a tridiagonal Hessian) and 3-DoF bend-bend-twist joints (spatial.py, dense Hessian); each
+has a linearised (small-angle) form, and either can add the magnets' interaction
+(dipoles.py), which couples every link with every other (a dense Hessian).
 """
 
 import contextlib

@@ -31,10 +31,12 @@ from threadpoolctl import ThreadpoolController
 MAX_STEP_RAD = 0.5       # largest change of any angle in one Newton step
 MAX_SADDLE_ESCAPES = 5
 ESCAPE_STEP_RAD = 0.05
-# Dense Hessians up to this size are factorised on one BLAS thread: measured here, a
-# 150 x 150 Cholesky takes 0.12 ms on one thread and 0.8 ms on two (hand-off costs more than
-# the arithmetic); past it the threads pay for themselves.
-SINGLE_THREAD_MAX_SIZE = 600
+# Dense Hessians of these sizes are factorised on one BLAS thread: measured here, with the
+# other core busy a 150 x 150 Cholesky took 0.12 ms on one thread and 0.8 ms on two (the
+# hand-off costs more than the arithmetic); past the upper size the threads pay for
+# themselves, and below the lower one OpenBLAS uses one thread anyway (and switching costs
+# 35 us, a tenth of a small solve).
+SINGLE_THREAD_SIZES = (32, 600)
 _BLAS = []  # the ThreadpoolController, made on first use (it inspects the loaded libraries)
 _COMPILED = []  # [True] once the compiled passes are ready (solve keeps them off its clock)
 
@@ -248,7 +250,7 @@ def _compile_kernels():
 
 def _blas_threads(size):
     """Return a context that keeps BLAS on one thread for a dense problem of this size."""
-    if size > SINGLE_THREAD_MAX_SIZE:
+    if not SINGLE_THREAD_SIZES[0] <= size <= SINGLE_THREAD_SIZES[1]:
         return contextlib.nullcontext()
     if not _BLAS:
         _BLAS.append(ThreadpoolController())

@@ -4,14 +4,16 @@ Benchmark: the statics model's speed against its accuracy, and against a Cossera
 
 For standard scenes (the validation cantilever at 90, 135 and 180 degrees to a 5 mT field;
 the chapter 5 braided tentacle fully inserted in an out-of-plane field; the chapter 6 strip
-of 24 segments, in a fixed field and coiling as its backbone is withdrawn) it solves at every fidelity setting (linearised and nonlinear, planar and
-3-DoF, with and without magnet-to-magnet interaction; 1 to 64 sub-links per segment) and
-prints the time per forward solve (median, cold start and warm start from a nearby state)
-beside the tip error against a converged reference of the same scene, checks the issue's
-speed targets, then writes bench/out/model_tradeoff.png (error against time: the Pareto
-front). The peer, PyElastica with magneto-pyelastica (bench/peer_elastica.py), relaxes the
-90 degree cantilever with damping; its wall time to settle within 1% of L is set beside
-ours at the same accuracy, timed back to back in the same run.
+of 24 segments, in a fixed field and coiling as its backbone is withdrawn) it solves at
+every fidelity setting (linearised and nonlinear, planar and 3-DoF, with and without
+magnet-to-magnet interaction; 1 to 64 sub-links per segment) and prints the time per
+forward solve (median, cold start and warm start from a nearby state; the coiling strip
+step by step along its path) beside the tip error against a converged reference of the
+same scene, checks the issue's speed targets, then writes bench/out/model_tradeoff.png
+(error against time: the Pareto front). The peer, PyElastica with magneto-pyelastica
+(bench/peer_elastica.py), relaxes the 90 degree cantilever with damping; its wall time to
+settle within 1% of L is set beside ours at the same accuracy, timed back to back in the
+same run.
 
 Run: make bench-model (creates the bench-only .venv-bench with the peer).
 """

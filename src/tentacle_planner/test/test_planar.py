@@ -42,7 +42,8 @@ def test_gravity_energy_is_the_height_of_the_centres_of_mass():
     centres = (pts[:-1] + pts[1:]) / 2
     elastic = 0.5 * np.dot(chain.stiffness_n_m[:, 0], np.diff(theta, prepend=0.0) ** 2)
     expected = elastic + np.sum(chain.masses_kg * 9.81 * centres[:, 1])
-    assert planar.energy(theta, chain.stiffness_n_m[:, 0], a, b) == pytest.approx(expected)
+    assert planar.energy(theta, chain.stiffness_n_m[:, 0], a, b) == pytest.approx(
+        expected, rel=1e-9, abs=0)
 
 
 def test_dipole_interaction_derivatives_match_finite_differences():
@@ -64,7 +65,7 @@ def test_dipole_interaction_derivatives_match_finite_differences():
 
     world = [chain.base_rotation @ turn(t) @ m for t, m in zip(theta, chain.moments_a_m2)]
     reference = dipoles.interaction(np.array(world), (pts[:-1] + pts[1:]) / 2, pairs, False)
-    assert energy == pytest.approx(reference.energy_j, rel=1e-12)
+    assert energy == pytest.approx(reference.energy_j, rel=1e-12, abs=0)
     eps = 1e-4
     eye = np.eye(n)
     fd_grad = [(planar.interaction(chain, theta + eps * e, pairs, False)[0]

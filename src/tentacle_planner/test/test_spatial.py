@@ -50,7 +50,7 @@ def test_gravity_energy_is_the_height_of_the_centres_of_mass():
     elastic = 0.5 * np.sum(chain.stiffness_n_m * q * q)
     expected = elastic + np.sum(chain.masses_kg * 9.81 * (centres[:, 2]
                                                           - chain.base_position_m[2]))
-    assert state.energy_j == pytest.approx(expected)
+    assert state.energy_j == pytest.approx(expected, rel=1e-9, abs=0)
 
 
 @pytest.mark.parametrize('degrees', [60, 135])

@@ -33,8 +33,8 @@ def with_change(path, value):
 def test_cantilever_file_has_the_issue_numbers(cantilever):
     spec, length, ei, ma = cantilever
     assert length == 0.02
-    assert ei == pytest.approx(1.0e5 * math.pi * 0.002 ** 4 / 64)
-    assert ma == pytest.approx(0.107 / MU0 * math.pi * 0.001 ** 2)
+    assert ei == pytest.approx(1.0e5 * math.pi * 0.002 ** 4 / 64, rel=1e-9, abs=0)
+    assert ma == pytest.approx(0.107 / MU0 * math.pi * 0.001 ** 2, rel=1e-9, abs=0)
     np.testing.assert_allclose(spec.base_rotation, np.eye(3))
 
 
@@ -43,9 +43,10 @@ def test_rectangular_section_and_anisotropic_moduli():
     doc['segments'][0]['youngs_modulus_pa'] = {'bend_1': 5e5, 'bend_2': 5e5, 'twist': 1e7}
     segment = parse_tentacle(doc).segments[0]
     in_plane, out_of_plane, twist = segment.bend_stiffness_n_m2
-    assert in_plane == pytest.approx(5e5 * 0.001 * 0.004 ** 3 / 12)
-    assert out_of_plane == pytest.approx(5e5 * 0.004 * 0.001 ** 3 / 12)
-    assert twist == pytest.approx(1e7 * (0.001 * 0.004 ** 3 + 0.004 * 0.001 ** 3) / 12)
+    assert in_plane == pytest.approx(5e5 * 0.001 * 0.004 ** 3 / 12, rel=1e-9, abs=0)
+    assert out_of_plane == pytest.approx(5e5 * 0.004 * 0.001 ** 3 / 12, rel=1e-9, abs=0)
+    polar = (0.001 * 0.004 ** 3 + 0.004 * 0.001 ** 3) / 12
+    assert twist == pytest.approx(1e7 * polar, rel=1e-9, abs=0)
 
 
 @pytest.mark.parametrize('path, value, message', [

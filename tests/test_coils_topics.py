@@ -48,7 +48,10 @@ def test_field_command_reaches_each_supply_and_field_agrees(coil_rig, probe, dia
         assert wait_for(lambda: close_to(emulators.setpoints(), currents, 0.0051)), (
             f'supplies hold {emulators.setpoints()}, expected {currents}')
         t_settled = time.monotonic() + 0.2  # ten L/R time constants of the emulated coil
-        assert wait_for(lambda: probe.latest(probe.fields, t_settled) is not None)
+        # /coils/field and /coils/currents are published together but arrive on their own
+        # subscriptions: wait for both, not for one and then read the other.
+        assert wait_for(lambda: probe.latest(probe.fields, t_settled) is not None
+                        and probe.latest(probe.currents, t_settled) is not None)
         msg = probe.latest(probe.fields, t_settled)
         assert msg.header.frame_id == 'coils'
         measured = [msg.vector.x, msg.vector.y, msg.vector.z]

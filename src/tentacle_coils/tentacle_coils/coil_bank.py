@@ -32,7 +32,7 @@ log = logging.getLogger('tentacle_coils')
 
 STEP_DT_CAP_S = 0.05  # longest interval one slew step may cover (s)
 READBACK_MAX_DEFER_S = 0.5  # longest a readback waits for a busy command stream (s)
-CHECK_PERIOD_S = 1.0  # how often to ask a supply for errors it would not report itself (s)
+STOP_GRACE_S = 1.0  # a safe stop switches outputs off this long after the ramp at the latest
 
 
 class Channel:
@@ -60,18 +60,28 @@ class Channel:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=f'coil-{name}', daemon=True)
         self.target_a = 0.0
-        self.sent_a = 0.0
+        self.sent_a = 0.0  # the setpoint the device holds, as far as the driver knows (A)
         self.output_wanted = False
         self.output_on = None  # None: unknown (before connect)
+        self.confirmed = False  # a read-back since the last set agreed with sent_a, output_on
+        self.held = None  # (setpoint A, output on) as last read back from the device
         self.measured_a = math.nan
         self.connected = False
         self.last_error = ''
         self.updates = 0
         self.faults = 0
-        self._t_step = time.monotonic()  # start of the current slew step (s)
-        self._t_last_set = 0.0
+        self._unreachable_logged = False
+        # Line-clock times (supply.line.now()): the slew reference is when the previous set
+        # left the line, or when the target left rest, whichever is later.
+        self._t_ref = -math.inf
+        self._t_last_set = -math.inf
         self._next_readback = 0.0
-        self._next_check = 0.0
+        self._next_verify = 0.0
+
+    @property
+    def label(self):
+        """Return 'axis (port)' for messages."""
+        return f'{self.name} ({self.supply.line.path})'
 
     # -- called from other threads ----------------------------------------------------------
     def request(self, target_a=None, output=None):
@@ -79,22 +89,43 @@ class Channel:
         with self._cond:
             if target_a is not None:
                 if self.target_a == self.sent_a:
-                    # Leaving rest: the slew budget starts now, not at the last send.
-                    self._t_step = time.monotonic()
+                    # Leaving rest: the slew budget starts now, or when the last set leaves
+                    # the line if it is still on its way.
+                    self._t_ref = max(self.supply.line.now(), self._t_ref)
                 self.target_a = float(target_a)
             if output is not None:
                 self.output_wanted = bool(output)
             self._cond.notify()
 
-    def at_zero(self):
-        """Return True when the device confirmed a zero setpoint (or is unreachable)."""
+    def settled_zero(self):
+        """Return True when a read-back confirmed a zero setpoint (or it is unreachable)."""
         with self._cond:
-            return not self.connected or (self.sent_a == 0.0 and self.target_a == 0.0)
+            return not self.connected or self._zero_confirmed()
 
-    def outputs_settled(self):
-        """Return True when the output is as wanted (or the device is unreachable)."""
+    def settled_off(self):
+        """Return True when a read-back confirmed zero and off (or it is unreachable)."""
         with self._cond:
-            return not self.connected or self.output_on == self.output_wanted
+            return not self.connected or (self._zero_confirmed() and self.output_on is False
+                                          and not self.output_wanted)
+
+    def _zero_confirmed(self):
+        return self.confirmed and self.sent_a == 0.0 and self.target_a == 0.0
+
+    def unsafe_reason(self):
+        """Return '' when the device read back zero current and output off, else why not."""
+        with self._cond:
+            if not self.connected:
+                return f'{self.label}: not connected ({self.last_error or "never answered"})'
+            if not self.confirmed:
+                held = '' if self.held is None else (
+                    f': last read back {self.held[0]:.4f} A, output '
+                    f'{"on" if self.held[1] else "off"}')
+                return f'{self.label}: zero and off not confirmed by read-back{held}'
+            if self.sent_a != 0.0:
+                return f'{self.label}: holds {self.sent_a:.4f} A'
+            if self.output_on:
+                return f'{self.label}: output on'
+            return ''
 
     def snapshot(self):
         """Return the channel's state as a dict (for diagnostics)."""
@@ -105,8 +136,8 @@ class Channel:
                 'identity': self.supply.identity, 'connected': self.connected,
                 'output_on': bool(self.output_on), 'target_a': self.target_a,
                 'setpoint_a': self.sent_a, 'measured_a': self.measured_a,
-                'last_error': self.last_error, 'updates': self.updates,
-                'faults': self.faults, **self.supply.counters,
+                'confirmed': self.confirmed, 'last_error': self.last_error,
+                'updates': self.updates, 'faults': self.faults, **self.supply.counters,
             }
 
     def start(self):
@@ -138,10 +169,13 @@ class Channel:
             except LinkLost as exc:
                 with self._cond:
                     self.connected = False
+                    self.confirmed = False
                     self.measured_a = math.nan
                 self._fault(f'link lost: {exc}')
                 self.supply.line.close()
             except SupplyFault as exc:
+                with self._cond:
+                    self.confirmed = False
                 self._fault(str(exc))
                 self._stop.wait(self.backoff_s[0])
 
@@ -159,31 +193,47 @@ class Channel:
             self.supply.line.close()
             with self._cond:
                 self.last_error = f'connect: {exc}'
+            if not self._unreachable_logged:  # once per outage; diagnostics carry the rest
+                self._unreachable_logged = True
+                log.error('supply %s unreachable (retrying with backoff): %s', self.label, exc)
             return False
+        self._unreachable_logged = False
         with self._cond:
             self.connected = True
             self.sent_a = 0.0  # connect() drove the device to zero
             self.output_on = None
-            self._next_readback = self._next_check = 0.0
-        log.info('supply %s connected on %s: %s', self.name, self.supply.line.path, identity)
+            self.confirmed = False
+            self._next_readback = self._next_verify = 0.0
+        log.info('supply %s connected: %s', self.label, identity)
         return True
+
+    def _due_in(self, now):
+        """Return seconds until there is work (<= 0: now); call with the lock held."""
+        if self.target_a != self.sent_a or self.output_on != self.output_wanted:
+            return 0.0
+        if self.target_a == 0.0 and not self.confirmed:
+            return 0.0  # a safe state is confirmed by read-back as soon as it is reached
+        wake = max(self._next_readback, self._t_last_set + self.readback_period_s)
+        if self.supply.verify_period_s is not None:
+            wake = min(wake, self._next_verify)
+        return wake - now
 
     def _serve(self):
         """
-        Do what is due: output change, one slew step, a readback.
+        Do what is due: output change, one slew step, a readback, a read-back check.
 
         A readback goes right after a set when one is due and no newer command is waiting,
         so in a command stream it uses the line while it would idle until the next command;
         when commands keep the line busy it is deferred, for at most READBACK_MAX_DEFER_S.
         It runs on its own only when no set has gone out for a readback period: a command
-        never waits behind a readback while commands keep coming.
+        never waits behind a readback while commands keep coming. The held state is read
+        back on the supply's own verify period (whatever the readback rate), and at once
+        when zero current is reached.
         """
+        line = self.supply.line
         with self._cond:
             while not self._stop.is_set():
-                if self.target_a != self.sent_a or self.output_on != self.output_wanted:
-                    break
-                wake = max(self._next_readback, self._t_last_set + self.readback_period_s)
-                wait = wake - time.monotonic()
+                wait = self._due_in(line.now())
                 if wait <= 0:
                     break
                 self._cond.wait(wait)
@@ -194,34 +244,66 @@ class Channel:
             self.supply.set_output(wanted)
             with self._cond:
                 self.output_on = wanted
+                self.confirmed = False
         if target != self.sent_a:
-            now = time.monotonic()
-            max_step = self.slew_rate_a_per_s * min(now - self._t_step, STEP_DT_CAP_S)
-            delta = target - self.sent_a
-            setpoint = target if abs(delta) <= max_step else self.sent_a + math.copysign(
-                max_step, delta)
-            self.supply.set_current(setpoint)
-            self._t_step = self._t_last_set = now
-            with self._cond:
-                self.sent_a = setpoint
-                self.updates += 1
-        now = time.monotonic()
+            self._step(target)
+        now = line.now()
         with self._cond:
             busy = self.target_a != self.sent_a
+            verify = (self.target_a == 0.0 and not self.confirmed and not busy) or (
+                self.supply.verify_period_s is not None and now >= self._next_verify)
         if now >= self._next_readback + (READBACK_MAX_DEFER_S if busy else 0.0):
             self._next_readback = now + self.readback_period_s
             measured = self.supply.read_current()
             with self._cond:
                 self.measured_a = measured
-        if now >= self._next_check:
-            self._next_check = now + CHECK_PERIOD_S
-            problems = self.supply.check(self.sent_a)
+        if verify:
+            self._verify()
+
+    def _step(self, target):
+        """Send one slew-limited step towards target (A)."""
+        line = self.supply.line
+        now = line.now()
+        # The step's own bytes leave no earlier than now plus their wire time, and the
+        # previous set left at _t_ref: that interval bounds the change at the device.
+        interval = max(now - self._t_ref, 0.0) + line.wire_time_s(self.supply.set_bytes)
+        max_step = self.slew_rate_a_per_s * min(interval, STEP_DT_CAP_S)
+        delta = target - self.sent_a
+        setpoint = target if abs(delta) <= max_step else self.sent_a + math.copysign(
+            max_step, delta)
+        if setpoint * self.sent_a < 0.0:
+            setpoint = 0.0  # stop at zero on the way through: polarity changes at rest only
+        self.supply.set_current(setpoint)
+        self._t_ref = line.tx_free_at
+        self._t_last_set = now
+        with self._cond:
+            self.sent_a = setpoint
+            self.confirmed = False
+            self.updates += 1
+
+    def _verify(self):
+        """Read back what the device holds; where it differs, go on from what it holds."""
+        setpoint_a, output_on = self.supply.read_held()
+        errors = self.supply.errors()
+        self._next_verify = self.supply.line.now() + (self.supply.verify_period_s or 0.0)
+        with self._cond:
+            self.held = (setpoint_a, output_on)
+            problems = list(errors)
+            if abs(setpoint_a - self.sent_a) > self.supply.resolution_a / 2 + 1e-9:
+                problems.append(f'device holds {setpoint_a:.4f} A, not {self.sent_a:.4f} A')
+                self.sent_a = setpoint_a  # the slew limit applies from what it really holds
+            if output_on != self.output_on:
+                problems.append(f'output is {"on" if output_on else "off"}, not '
+                                f'{"on" if self.output_on else "off"}')
+                self.output_on = output_on
+            self.confirmed = len(problems) == len(errors)
             if problems:
-                with self._cond:
-                    self.last_error = '; '.join(problems)
-                log.warning('supply %s reports %s; setpoint re-sent', self.name,
-                            self.last_error)
+                self.last_error = '; '.join(problems)
+        if problems:
+            log.warning('supply %s reports %s; setpoint re-sent', self.label, '; '.join(problems))
+            if self.confirmed:  # device errors only: the held state is right, assert it again
                 self.supply.set_current(self.sent_a)
+                self._t_ref = self.supply.line.tx_free_at
 
 
 class CoilBank:
@@ -247,8 +329,10 @@ class CoilBank:
         self._was_enabled = False  # outputs on when the estop came: restored on release
         self._fault = ''
         self._stopping = ''   # reason of a safe stop in progress (ramp, then outputs off)
+        self._stop_deadline = 0.0
         self._watchdog_tripped = False
         self._last_command = time.monotonic()
+        self.unsafe = []  # after shutdown(): what could not be confirmed zero and off
         self._halt = threading.Event()
         self._supervisor = threading.Thread(target=self._supervise, name='coil-supervisor',
                                             daemon=True)
@@ -288,7 +372,11 @@ class CoilBank:
     def status(self):
         """Return (level, message) for the bank: 'ok', 'warn' or 'error'."""
         if self._estop:
-            return 'warn', 'estop active: outputs zero and off'
+            unsafe = [r for r in (ch.unsafe_reason() for ch in self.channels) if r]
+            if unsafe:
+                return 'warn', 'estop active: going to zero and off, not yet confirmed: ' + (
+                    '; '.join(unsafe))
+            return 'warn', 'estop active: outputs zero and off (read back)'
         if self._fault:
             return 'error', f'fault: {self._fault}'
         if not self.connected():
@@ -370,10 +458,20 @@ class CoilBank:
         if self._was_enabled:
             self.enable(True)
 
+    def _ramp_time_s(self):
+        """Return how long the slowest axis takes to ramp to zero at the slew limit (s)."""
+        return max(abs(ch.sent_a) / ch.slew_rate_a_per_s for ch in self.channels)
+
     def _begin_stop(self, reason):
-        """Zero every target now; the supervisor switches outputs off once all are at zero."""
+        """
+        Zero every target now; the supervisor switches outputs off once all read back zero.
+
+        Off is safer than on at any current: if some supply cannot confirm zero within the
+        ramp time plus STOP_GRACE_S, every output is switched off all the same.
+        """
         self._enabled = False
         self._stopping = reason
+        self._stop_deadline = time.monotonic() + self._ramp_time_s() + STOP_GRACE_S
         for channel in self.channels:
             channel.request(target_a=0.0)
         log.info('coils: safe stop (%s)', reason)
@@ -399,49 +497,55 @@ class CoilBank:
                         channel.request(target_a=0.0)
                     log.warning('coils: watchdog, no command for %.3g s: ramping to zero',
                                 self.watchdog_s)
-                if self._stopping and all(ch.at_zero() for ch in self.channels):
+                if self._stopping and (now > self._stop_deadline or all(
+                        ch.settled_zero() for ch in self.channels)):
                     for channel in self.channels:
                         channel.request(output=False)
                     self._stopping = ''
                 if (self._fault and self.connected()
-                        and all(ch.at_zero() for ch in self.channels)):
-                    log.info('coils: fault cleared (%s); every supply holds zero', self._fault)
+                        and all(ch.settled_zero() for ch in self.channels)):
+                    log.info('coils: fault cleared (%s); every supply read back zero',
+                             self._fault)
                     self._fault = ''
 
     def shutdown(self, reason='shutdown', timeout_s=None):
         """
         Ramp to zero, switch outputs off and stop every worker; blocks until done.
 
-        :param timeout_s: how long to wait for the ramp and the outputs (s); default: the
-            ramp time at the slew limit plus one second
-        :return: True when every supply confirmed zero and off
+        Zero and off count only when read back from each device; a worker that reads back
+        anything else goes on from what the device holds until the deadline. What could not
+        be confirmed is left in ``unsafe``, one line per supply.
+
+        :param timeout_s: how long to wait for the ramp (s); default: the ramp time at the
+            slew limit plus one second; switching off and confirming get one second more
+        :return: True when every supply read back zero current and output off
         """
         with self._lock:
             self._begin_stop(reason)
         if timeout_s is None:
-            slowest = max(abs(ch.sent_a) / ch.slew_rate_a_per_s for ch in self.channels)
-            timeout_s = slowest + 1.0
+            timeout_s = self._ramp_time_s() + STOP_GRACE_S
         deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline and not all(ch.at_zero() for ch in self.channels):
+        while time.monotonic() < deadline and not all(
+                ch.settled_zero() for ch in self.channels):
             time.sleep(0.005)
         for channel in self.channels:
             channel.request(output=False)
         while time.monotonic() < deadline + 1.0 and not all(
-                ch.outputs_settled() for ch in self.channels):
+                ch.settled_off() for ch in self.channels):
             time.sleep(0.005)
-        safe = all(ch.connected and ch.sent_a == 0.0 and ch.output_on is False
-                   for ch in self.channels)
+        self.unsafe = [r for r in (ch.unsafe_reason() for ch in self.channels) if r]
         self._halt.set()
         if self._supervisor.is_alive():
             self._supervisor.join(timeout=1.0)
         for channel in self.channels:
             channel.stop()
-        return safe
+        return not self.unsafe
 
 
 def build_bank(ports, *, dialect, baud, addresses=(1, 1, 1), polarity_inverted=(False,) * 3,
                polarity_mode='signed', max_current_a, slew_rate_a_per_s, watchdog_s,
-               readback_period_s=0.1, retries=3, reply_timeout_s=0.1, voltage_limit_v=30.0):
+               readback_period_s=0.1, retries=3, reply_timeout_s=0.1, max_turnaround_s=0.25,
+               voltage_limit_v=30.0):
     """
     Return a CoilBank of three supplies on the given ports (x, y, z), not yet started.
 
@@ -453,12 +557,16 @@ def build_bank(ports, *, dialect, baud, addresses=(1, 1, 1), polarity_inverted=(
             raise ConfigError(f'{what} needs 3 entries (x, y, z), got {len(values)}')
     if not all(0 <= a <= 255 for a in addresses):
         raise ConfigError(f'addresses {list(addresses)} must each be in 0..255')
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        if ports[i] == ports[j]:  # each supply needs a line of its own: the second cannot open
+            log.error('ports: supplies %s and %s both name %s; each needs its own port',
+                      'xyz'[i], 'xyz'[j], ports[i])
     channels = []
     for name, port, address, inverted in zip('xyz', ports, addresses, polarity_inverted):
         supply = make_supply(dialect, SerialLine(port, baud), address=address,
                              polarity_inverted=inverted, polarity_mode=polarity_mode,
                              retries=retries, reply_timeout_s=reply_timeout_s,
-                             voltage_limit_v=voltage_limit_v)
+                             max_turnaround_s=max_turnaround_s, voltage_limit_v=voltage_limit_v)
         channels.append(Channel(name, supply, slew_rate_a_per_s=slew_rate_a_per_s,
                                 readback_period_s=readback_period_s))
     return CoilBank(channels, max_current_a=max_current_a, watchdog_s=watchdog_s)

@@ -8,29 +8,30 @@ positive field direction; ``polarity_inverted`` flips the sign at the wire for a
 the other way round.
 """
 
-import time
-
 from tentacle_coils import dxkdp, scpi
 from tentacle_coils.errors import ConfigError, FrameError, NakError, ReplyTimeout, SupplyFault
 
-_RETRYABLE = (ReplyTimeout, FrameError, NakError)
-
 
 class Supply:
-    """What every dialect provides: connect, output on/off, set and read current."""
+    """What every dialect provides: connect, output on/off, set and read current, read back."""
 
     dialect = ''
+    resolution_a = 0.01  # smallest current step the wire carries (A)
+    set_bytes = 0  # bytes of the shortest current set command on the wire
+    verify_period_s = None  # read the held state back this often (s); None: only to confirm
 
     def __init__(self, line, *, address=1, polarity_inverted=False, retries=3,
-                 reply_timeout_s=0.1, voltage_limit_v=30.0):
+                 reply_timeout_s=0.1, max_turnaround_s=0.25, voltage_limit_v=30.0):
         """
         Bind to a line.
 
-        :param line: a SerialLine (opened by the caller)
+        :param line: a SerialLine (opened by the caller), or a line with the same methods
         :param address: bus address (dxkdp)
         :param polarity_inverted: the supply is wired reversed
         :param retries: attempts after the first before SupplyFault
         :param reply_timeout_s: how long past the bytes' own wire time to wait for a reply
+        :param max_turnaround_s: the device's worst time to answer: after a timeout the line
+            must be quiet this long before the next request, so a late reply is dropped
         :param voltage_limit_v: compliance voltage programmed at connect (dxkdp)
         """
         self.line = line
@@ -38,30 +39,53 @@ class Supply:
         self.sign = -1.0 if polarity_inverted else 1.0
         self.retries = int(retries)
         self.reply_timeout_s = float(reply_timeout_s)
+        self.max_turnaround_s = float(max_turnaround_s)
         self.voltage_limit_v = float(voltage_limit_v)
-        self.counters = {'commands': 0, 'retries': 0, 'naks': 0, 'timeouts': 0, 'garbled': 0}
+        self.counters = {'commands': 0, 'retries': 0, 'naks': 0, 'timeouts': 0, 'garbled': 0,
+                         'stale_bytes': 0, 'unconfirmed_sets': 0}
         self.identity = ''
+        self._out_of_step = False  # an unanswered request may still be answered
 
-    def _attempts(self, what, attempt):
-        """Run attempt() up to 1 + retries times; count and classify failures."""
+    def _attempts(self, what, attempt, verify=None):
+        """
+        Run attempt() up to 1 + retries times; count and classify failures.
+
+        A timeout or a garbled reply leaves the exchange ambiguous: the device may answer
+        late, and may have acted. Before the next request the line is drained until it has
+        been quiet for ``max_turnaround_s`` (a late reply must not answer a later request),
+        and a set that succeeds after an ambiguous attempt is confirmed by ``verify()`` (a
+        read-back returning '' or what is wrong): its ACK could still be a stale one.
+        A NAK is a clean answer: the set was refused, and is seen as refused.
+        """
         last = None
+        ambiguous = False
         for n in range(1 + self.retries):
             if n:
                 self.counters['retries'] += 1
-                # Let a late or garbled reply finish before the next try reads.
-                self.line.discard_input(quiet_s=self.reply_timeout_s / 4)
             self.counters['commands'] += 1
             try:
-                return attempt()
+                if self._out_of_step:
+                    self.counters['stale_bytes'] += self.line.discard_input(
+                        quiet_s=self.max_turnaround_s)
+                    self._out_of_step = False
+                result = attempt()
+                problem = verify() if ambiguous and verify is not None else ''
+                if not problem:
+                    return result
+                self.counters['unconfirmed_sets'] += 1
+                self._out_of_step = True
+                last = f'read-back after an ambiguous reply: {problem}'
             except NakError as exc:
                 self.counters['naks'] += 1
                 last = exc
             except ReplyTimeout as exc:
                 self.counters['timeouts'] += 1
                 last = exc
+                self._out_of_step = ambiguous = True
             except FrameError as exc:
                 self.counters['garbled'] += 1
                 last = exc
+                self._out_of_step = ambiguous = True
         raise SupplyFault(f'{self.line.path}: {what} failed after {1 + self.retries} attempts: '
                           f'{last}')
 
@@ -81,12 +105,12 @@ class Supply:
         """Return the measured current (A, coil frame)."""
         raise NotImplementedError
 
-    def check(self, setpoint_a):
-        """
-        Return the problems the device reports with the setpoint it should hold (A).
+    def read_held(self):
+        """Return (setpoint in A, coil frame; output on) as the device itself reports them."""
+        raise NotImplementedError
 
-        An ACK already confirms a dxkdp set, so the base has nothing to check.
-        """
+    def errors(self):
+        """Return the errors the device has queued (text, oldest first); none by default."""
         return []
 
 
@@ -96,9 +120,13 @@ class DxkdpSupply(Supply):
 
     ``polarity_mode`` is ``signed`` (second generation: negative current as two's complement)
     or ``command`` (first generation: polarity set by command 0x24, magnitude by 0x22).
+    READ_STATE (0x28) is taken to report the output state and the programmed setpoints, and
+    READ_OUTPUT (0x26) what is measured: confirm on your own units.
     """
 
     dialect = 'dxkdp'
+    resolution_a = dxkdp.AMPS_PER_COUNT
+    set_bytes = dxkdp.wire_bytes(dxkdp.Code.CURRENT)[0]
 
     def __init__(self, line, *, polarity_mode='signed', **kwargs):
         """Bind to a line; see Supply for the other arguments."""
@@ -108,7 +136,7 @@ class DxkdpSupply(Supply):
         self.signed = polarity_mode == 'signed'
         self._positive = None  # device polarity in command mode; None: unknown
 
-    def _exchange(self, frame):
+    def _exchange(self, frame, verify=None):
         """Send one request; return None for an ACKed set, the reply Frame for a read."""
         request_bytes, reply_bytes = dxkdp.wire_bytes(frame[2])
         wait_s = self.line.wire_time_s(request_bytes + reply_bytes) + self.reply_timeout_s
@@ -116,7 +144,7 @@ class DxkdpSupply(Supply):
 
         def attempt():
             self.line.write(frame)
-            deadline = time.monotonic() + wait_s
+            deadline = self.line.now() + wait_s
             if dxkdp.COMMANDS[code].reply_data_len is None:
                 if not dxkdp.parse_ack(self.line.read_exact(1, deadline)[0]):
                     raise NakError(f'{self.line.path}: {code.name} answered NAK')
@@ -131,15 +159,31 @@ class DxkdpSupply(Supply):
                                  f'to a request for address {self.address} code {code:02x}')
             return reply
 
-        return self._attempts(code.name, attempt)
+        return self._attempts(code.name, attempt, verify)
+
+    def _read_state(self):
+        return dxkdp.parse_reading(self._exchange(dxkdp.read_state(self.address)), self.signed)
+
+    def _state_differs(self, output_on=None, current_a=None, voltage_v=None):
+        """Return what the device's state (READ_STATE) has other than expected, or ''."""
+        state = self._read_state()
+        if output_on is not None and state.output_on != output_on:
+            return f'output is {"on" if state.output_on else "off"}'
+        if current_a is not None and abs(state.current_a - current_a) > dxkdp.AMPS_PER_COUNT / 2:
+            return f'current setpoint is {state.current_a:.2f} A, not {current_a:.2f} A'
+        if voltage_v is not None and abs(state.voltage_v - voltage_v) > (
+                dxkdp.VOLTS_PER_COUNT / 2):
+            return f'voltage setpoint is {state.voltage_v:.2f} V, not {voltage_v:.2f} V'
+        return ''
 
     def connect(self):
         """Read the state (presence), program the voltage limit and zero current."""
         self.line.discard_input()
-        state = dxkdp.parse_reading(self._exchange(dxkdp.read_state(self.address)),
-                                    self.signed)
+        self._out_of_step = False
+        state = self._read_state()
         self._positive = None
-        self._exchange(dxkdp.set_voltage(self.address, self.voltage_limit_v))
+        self._exchange(dxkdp.set_voltage(self.address, self.voltage_limit_v),
+                       lambda: self._state_differs(voltage_v=self.voltage_limit_v))
         self.set_current(0.0)
         output = 'on' if state.output_on else 'off'
         self.identity = f'dxkdp address {self.address} (output {output})'
@@ -147,51 +191,65 @@ class DxkdpSupply(Supply):
 
     def set_output(self, on):
         """Switch the output on or off."""
-        self._exchange(dxkdp.set_output(self.address, on))
+        self._exchange(dxkdp.set_output(self.address, on),
+                       lambda: self._state_differs(output_on=on))
 
     def set_current(self, current_a):
         """Set the current setpoint (A, coil frame)."""
         device_a = self.sign * current_a
         if self.signed:
-            self._exchange(dxkdp.set_current(self.address, device_a, signed=True))
+            self._exchange(dxkdp.set_current(self.address, device_a, signed=True),
+                           lambda: self._state_differs(current_a=device_a))
             return
         positive = device_a >= 0
         if positive != self._positive:
             self._exchange(dxkdp.set_polarity(self.address, positive, positive))
             self._positive = positive
-        self._exchange(dxkdp.set_current(self.address, abs(device_a)))
+        self._exchange(dxkdp.set_current(self.address, abs(device_a)),
+                       lambda: self._state_differs(current_a=abs(device_a)))
+
+    def _coil_frame(self, device_a):
+        if not self.signed and self._positive is False:
+            device_a = -device_a
+        return self.sign * device_a
 
     def read_current(self):
         """Return the measured current (A, coil frame)."""
         reading = dxkdp.parse_reading(self._exchange(dxkdp.read_output(self.address)),
                                       self.signed)
-        device_a = reading.current_a
-        if not self.signed and self._positive is False:
-            device_a = -device_a
-        return self.sign * device_a
+        return self._coil_frame(reading.current_a)
+
+    def read_held(self):
+        """Return (setpoint in A, coil frame; output on) from READ_STATE."""
+        state = self._read_state()
+        return self._coil_frame(state.current_a), state.output_on
 
 
 class ScpiSupply(Supply):
     """A generic SCPI bipolar supply: set commands get no reply, queries one line each."""
 
     dialect = 'scpi'
+    resolution_a = 1e-4
+    set_bytes = len(scpi.set_current(0.0))
+    verify_period_s = 1.0  # a lost set is silent: read the setpoint back on this period
 
     def _query(self, request, parse):
         wait_s = self.line.wire_time_s(len(request) + 24) + self.reply_timeout_s
 
         def attempt():
             self.line.write(request)
-            return parse(self.line.read_until(scpi.TERMINATOR, time.monotonic() + wait_s))
+            return parse(self.line.read_until(scpi.TERMINATOR, self.line.now() + wait_s))
 
         return self._attempts(request.decode('ascii').strip(), attempt)
 
     def connect(self):
         """Identify the device, drain its error queue and zero the current."""
         self.line.discard_input()
+        self._out_of_step = False
         maker, model, serial_no, firmware = self._query(scpi.identify(), scpi.parse_identity)
-        self.poll_errors()
+        self.errors()
         self.set_current(0.0)
-        if self.check(0.0):
+        if self.read_setpoint() != 0.0:
             raise SupplyFault(f'{self.line.path}: setpoint did not reach zero at connect')
         self.identity = f'{maker} {model} s/n {serial_no} fw {firmware}'
         return self.identity
@@ -200,7 +258,7 @@ class ScpiSupply(Supply):
         """Switch the output on or off and confirm with ``OUTP?``."""
         self.counters['commands'] += 1
         self.line.write(scpi.set_output(on))
-        if self._query(scpi.query_output(), scpi.parse_bool) != on:
+        if self.read_output() != on:
             raise SupplyFault(f'{self.line.path}: output did not switch {"on" if on else "off"}')
 
     def set_current(self, current_a):
@@ -216,15 +274,15 @@ class ScpiSupply(Supply):
         """Return the setpoint the device holds (A, coil frame)."""
         return self.sign * self._query(scpi.query_setpoint(), scpi.parse_float)
 
-    def check(self, setpoint_a):
-        """Return queued device errors, and a setpoint mismatch (set commands get no reply)."""
-        problems = self.poll_errors()
-        held_a = self.read_setpoint()
-        if abs(held_a - setpoint_a) > 1e-4 + 1e-6 * abs(setpoint_a):
-            problems.append(f'device holds {held_a:.4f} A, not {setpoint_a:.4f} A')
-        return problems
+    def read_output(self):
+        """Return whether the output is on (``OUTP?``)."""
+        return self._query(scpi.query_output(), scpi.parse_bool)
 
-    def poll_errors(self, max_entries=8):
+    def read_held(self):
+        """Return (setpoint in A, coil frame; output on) from ``CURR?`` and ``OUTP?``."""
+        return self.read_setpoint(), self.read_output()
+
+    def errors(self, max_entries=8):
         """Return the queued ``SYST:ERR?`` entries as text, oldest first."""
         errors = []
         for _ in range(max_entries):

@@ -10,7 +10,7 @@ import time
 
 import serial
 
-from tentacle_coils.errors import LinkLost, ReplyTimeout
+from tentacle_coils.errors import FrameError, LinkLost, ReplyTimeout
 
 BITS_PER_BYTE = 10  # 8N1: start, 8 data, stop
 WRITE_TIMEOUT_S = 1.0  # a write that cannot go out this long means the line is gone
@@ -20,10 +20,11 @@ class SerialLine:
     """
     One serial port.
 
-    Reads take an absolute deadline (``time.monotonic()`` seconds) and raise ReplyTimeout
-    past it. Writes are paced at ``baud`` with at most one write queued behind the one on the
-    line: commands that get no reply keep the line busy but never queue up stale ones.
-    Any I/O failure raises LinkLost and closes the port.
+    Reads take an absolute deadline (``now()`` seconds) and raise ReplyTimeout past it.
+    Writes are paced at ``baud`` with at most one write queued behind the one on the line:
+    commands that get no reply keep the line busy but never queue up stale ones. Any I/O
+    failure raises LinkLost and closes the port. Drivers take every time from ``now()``, so
+    a scripted line with a virtual clock (tentacle_sim.scripted_line) can stand in for it.
     """
 
     def __init__(self, path, baud):
@@ -33,6 +34,15 @@ class SerialLine:
         self._port = None
         self._rx = bytearray()
         self._tx_free_at = 0.0
+
+    def now(self):
+        """Return the line's clock (s): ``time.monotonic()``."""
+        return time.monotonic()
+
+    @property
+    def tx_free_at(self):
+        """Return when the last byte written so far leaves the line (``now()`` seconds)."""
+        return self._tx_free_at
 
     def wire_time_s(self, n_bytes):
         """Return the time n_bytes take on the line (s)."""
@@ -79,6 +89,7 @@ class SerialLine:
         """
         Send bytes once the previous write has left the line.
 
+        :return: when the last of these bytes leaves the line (``now()`` seconds)
         :raises LinkLost: the port failed
         """
         fd = self._require().fileno()
@@ -103,6 +114,7 @@ class SerialLine:
         except OSError as exc:
             raise self._lost(exc) from None
         self._tx_free_at = max(time.monotonic(), self._tx_free_at) + wire_s
+        return self._tx_free_at
 
     def _fill(self, deadline):
         """Wait until more bytes arrive or the deadline passes; return False on timeout."""
@@ -155,12 +167,23 @@ class SerialLine:
                 raise ReplyTimeout(f'{self.path}: no complete line by the deadline'
                                    + (f' (got {got[:40]!r})' if got else ''))
 
-    def discard_input(self, quiet_s=0.0):
+    def discard_input(self, quiet_s=0.0, max_s=5.0):
         """
         Drop buffered and pending input; with quiet_s, until the line is quiet that long.
 
+        :param quiet_s: how long no byte may arrive before the line counts as quiet (s)
+        :param max_s: give up on a line that never goes quiet after this long (s)
+        :return: the number of bytes dropped
+        :raises FrameError: the line was not quiet for quiet_s within max_s (babbling)
         :raises LinkLost: the port failed
         """
+        dropped = len(self._rx)
         self._rx.clear()
+        give_up = time.monotonic() + max_s
         while self._fill(time.monotonic() + quiet_s):
+            dropped += len(self._rx)
             self._rx.clear()
+            if time.monotonic() > give_up:
+                raise FrameError(f'{self.path}: still receiving after {max_s:g} s '
+                                 f'({dropped} bytes dropped)')
+        return dropped

@@ -153,3 +153,54 @@ def test_shutdown_ramps_to_zero_then_switches_off(rig, wait_for):
     last_output = [max(e['t'] for e in emu.log if 'output_on' in e) for emu in emus]
     last_set = [max(t for t, _ in set_entries(emu)) for emu in emus]
     assert all(o > s for o, s in zip(last_output, last_set))  # zero first, then off
+
+
+def test_scpi_exit_reads_back_zero_and_resends_a_lost_last_zero(rig, wait_for):
+    bank, emus = rig('scpi', slew_rate_a_per_s=100.0)
+    bank.command([4.7, -4.7, 4.7])
+    assert wait_for(lambda: setpoints(emus) == [4.7, -4.7, 4.7])
+    emus[1].inject('no_reply', count=1, on_current_a=0.0)  # the ramp's last CURR 0 is lost
+    assert bank.shutdown() is True
+    assert setpoints(emus) == [0.0, 0.0, 0.0]  # read back, not assumed
+    assert not any(emu.state()['output_on'] for emu in emus)
+    lost = [e for e in emus[1].log if e.get('fault') == 'no_reply']
+    assert lost and lost[0]['current_a'] == 0.0
+
+
+def test_scpi_exit_that_cannot_confirm_zero_says_so_and_names_the_supply(rig, wait_for):
+    bank, emus = rig('scpi', slew_rate_a_per_s=100.0)
+    bank.command([2.0, 2.0, 2.0])
+    assert wait_for(lambda: setpoints(emus) == [2.0, 2.0, 2.0])
+    emus[2].inject('no_reply', count=10 ** 6, on_current_a=0.0)  # z never takes zero
+    assert bank.shutdown(timeout_s=0.5) is False
+    assert len(bank.unsafe) == 1 and bank.unsafe[0].startswith(f'z ({emus[2].port})')
+    assert 'holds' in bank.unsafe[0] or 'not confirmed' in bank.unsafe[0]
+    assert emus[2].state()['setpoint_a'] != 0.0  # what the message says is true
+    assert setpoints(emus)[:2] == [0.0, 0.0]
+
+
+def test_scpi_lost_set_is_found_on_the_verify_period_whatever_the_readback_rate(rig, wait_for):
+    bank, emus = rig('scpi', readback_period_s=10.0)
+    bank.command([2.0, 2.0, 2.0])
+    assert wait_for(lambda: setpoints(emus) == [2.0, 2.0, 2.0])
+    emus[0].inject('no_reply', count=1)  # the next set on x is lost silently
+    t_lost = time.monotonic()
+    bank.command([3.0, 3.0, 3.0])
+    assert wait_for(lambda: setpoints(emus) == [3.0, 3.0, 3.0], timeout_s=2.5)
+    assert time.monotonic() - t_lost < 2.5  # one verify period (1 s), not the 10 s readback
+    assert [e.get('fault') for e in emus[0].log].count('no_reply') == 1
+
+
+def test_estop_reports_zero_and_off_only_once_read_back(rig, wait_for):
+    bank, emus = rig('scpi', slew_rate_a_per_s=100.0)
+    bank.command([3.0, 3.0, 3.0])
+    assert wait_for(lambda: setpoints(emus) == [3.0, 3.0, 3.0])
+    emus[0].inject('no_reply', count=10 ** 6, on_current_a=0.0)
+    bank.set_estop(True)
+    time.sleep(0.5)
+    level, message = bank.status()
+    assert 'not yet confirmed' in message and f'x ({emus[0].port})' in message
+    assert 'outputs zero and off' not in message
+    # Off is safer than on at any current: after the ramp time and a grace, all switch off.
+    assert wait_for(lambda: not any(emu.state()['output_on'] for emu in emus), timeout_s=3.0)
+    assert 'not yet confirmed' in bank.status()[1]  # x still holds current: still said

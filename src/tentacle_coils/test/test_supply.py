@@ -88,13 +88,32 @@ def test_scpi_set_read_and_check(emulate):
     assert emu.state()['setpoint_a'] == pytest.approx(-1.2345)
     time.sleep(0.1)
     assert supply.read_current() == pytest.approx(1.2345, abs=1e-3)
-    assert supply.check(1.2345) == []
+    assert supply.errors() == [] and supply.read_held() == (pytest.approx(1.2345), True)
     emu.inject('error', count=1, code=-222, text='Data out of range')
     emu.inject('no_reply', count=1)  # the next set is lost silently, as SCPI allows
     supply.set_current(2.0)
-    problems = supply.check(2.0)
-    assert problems[0] == '-222,"Data out of range"'
-    assert 'holds 1.2345 A, not 2.0000 A' in problems[1]
+    assert supply.errors() == ['-222,"Data out of range"']
+    assert supply.read_held() == (pytest.approx(1.2345), True)  # not 2 A: the set was lost
+    supply.line.close()
+
+
+def test_dxkdp_read_back_reports_the_setpoint_and_output(emulate):
+    emu, = emulate('dxkdp', names='x', baud=115200)
+    supply = connected(emu, 'dxkdp', 115200, polarity_inverted=True)
+    supply.set_output(True)
+    supply.set_current(-2.5)
+    assert supply.read_held() == (pytest.approx(-2.5), True)
+    assert emu.state()['setpoint_a'] == pytest.approx(2.5)
+    supply.line.close()
+
+
+def test_scpi_nak_queues_an_error_as_the_device_would(emulate):
+    emu, = emulate('scpi', names='x', baud=115200)
+    supply = connected(emu, 'scpi', 115200)
+    emu.inject('nak', count=1)
+    supply.set_current(1.0)  # refused: no reply on the line, -222 in the error queue
+    assert supply.errors() == ['-222,"Data out of range"']
+    assert supply.read_setpoint() == 0.0
     supply.line.close()
 
 

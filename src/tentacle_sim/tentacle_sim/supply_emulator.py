@@ -126,7 +126,7 @@ class EmulatedSupply:
 
     # -- faults and state -------------------------------------------------------------------
     def inject(self, kind, count=1, late_s=0.2, duration_s=1.0, code=-222,
-               text='Data out of range'):
+               text='Data out of range', on_current_a=None):
         """
         Arm a fault.
 
@@ -136,6 +136,8 @@ class EmulatedSupply:
         :param duration_s: how long the port is gone for 'disconnect' (s)
         :param code: error code for 'error'
         :param text: error text for 'error'
+        :param on_current_a: only commands that set this current (A) count (no_reply, nak,
+            garble, late), e.g. 0.0 for the last set of a ramp to zero
         """
         if kind not in FAULT_KINDS:
             raise ValueError(f"fault '{kind}' is not one of {FAULT_KINDS}")
@@ -145,14 +147,15 @@ class EmulatedSupply:
             elif kind == 'disconnect':
                 self._reconnect_at = time.monotonic() + duration_s
             else:
-                self._faults[kind] = (count, late_s)
+                self._faults[kind] = (count, late_s, on_current_a)
 
-    def _take_fault(self):
+    def _take_fault(self, current_a):
+        """Return (fault kind or None, late_s) for a request that sets current_a (or None)."""
         with self._lock:
             for kind in ('no_reply', 'nak', 'garble', 'late'):
-                count, late_s = self._faults.get(kind, (0, 0.0))
-                if count > 0:
-                    self._faults[kind] = (count - 1, late_s)
+                count, late_s, only_a = self._faults.get(kind, (0, 0.0, None))
+                if count > 0 and (only_a is None or current_a == only_a):
+                    self._faults[kind] = (count - 1, late_s, only_a)
                     return kind, late_s
         return None, 0.0
 
@@ -239,20 +242,20 @@ class EmulatedSupply:
         wait = arrived - time.monotonic()
         if wait > 0:
             time.sleep(wait)  # the request's last byte has not crossed the line yet
-        fault, late_s = self._take_fault()
+        fault, late_s = self._take_fault(self._requested_current(request))
         handler = self._dxkdp if self.dialect == 'dxkdp' else self._scpi
         meaning, reply = handler(request, apply=fault not in ('no_reply', 'nak'))
         if fault:
             meaning['fault'] = fault
         self._record(request, arrived, meaning)
-        if fault == 'no_reply' or reply is None:
-            return
         if fault == 'nak':
-            reply = bytes((dxkdp.NAK,)) if self.dialect == 'dxkdp' else None
-            if reply is None:
+            if self.dialect == 'scpi':  # SCPI refuses in its error queue, not on the line
                 with self._lock:
                     self._errors.append(scpi.DATA_OUT_OF_RANGE)
                 return
+            reply = bytes((dxkdp.NAK,))
+        if fault == 'no_reply' or reply is None:
+            return
         if fault == 'garble':
             reply = (bytes((0x5A,)) if len(reply) == 1 else reply[:-1] + bytes(
                 ((reply[-1] + 1) & 0xFF,))) if self.dialect == 'dxkdp' else _GARBLED_LINE
@@ -262,6 +265,19 @@ class EmulatedSupply:
             os.write(self._master, reply)
         except (OSError, TypeError):
             pass  # the port went away meanwhile
+
+    def _requested_current(self, raw):
+        """Return the current (A) a request sets, or None (malformed or not a set)."""
+        try:
+            if self.dialect == 'scpi':
+                header, argument, _ = scpi.parse_command(raw)
+                return float(argument) if header == 'CURR' else None
+            values = dxkdp.decode_request(dxkdp.decode_frame(raw))
+        except (FrameError, ValueError):
+            return None
+        if 'current_count' not in values:
+            return None
+        return self._current_from_count(values['current_count'])
 
     # -- dialects ---------------------------------------------------------------------------
     def _current_from_count(self, count):
@@ -282,8 +298,12 @@ class EmulatedSupply:
         code = dxkdp.Code(frame.code)
         meaning = {'command': code.name}
         if code in (dxkdp.Code.READ_OUTPUT, dxkdp.Code.READ_STATE):
-            current_a = self.load.current_a()
-            reading = dxkdp.Reading(voltage_v=self.load.voltage_v(),
+            # READ_OUTPUT: what is measured; READ_STATE: output state and the setpoints.
+            if code == dxkdp.Code.READ_OUTPUT:
+                voltage_v, current_a = self.load.voltage_v(), self.load.current_a()
+            else:
+                voltage_v, current_a = self.voltage_limit_v, self.load.setpoint_a
+            reading = dxkdp.Reading(voltage_v=voltage_v,
                                     current_a=current_a if self.signed else abs(current_a),
                                     output_on=self.load.output_on, constant_current=True)
             return meaning, dxkdp.encode_reading(self.address, code, reading, self.signed)

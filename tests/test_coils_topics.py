@@ -5,7 +5,9 @@ Expected currents come from solving B = A I independently of the node's code (nu
 what reached the wire is read from the emulator's received-bytes log.
 """
 
+import os
 import signal
+import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -235,6 +237,8 @@ def test_missing_port_at_start_keeps_the_node_up_until_it_appears(coil_rig, prob
     assert not any(emulators.outputs()[1:])  # not energised while a supply is missing
     assert wait_for(lambda: all(emulators.outputs()), timeout_s=12.0), (
         f'outputs {emulators.outputs()} after x came back:\n{node.output()}')
+    assert node.output().count('unreachable') == 1  # logged once as an error, not per retry
+    assert '[ERROR]' in node.output().split('unreachable')[0].splitlines()[-1]
 
 
 def test_killed_node_still_leaves_the_coils_at_zero_and_off(coil_rig, probe):
@@ -247,7 +251,9 @@ def test_killed_node_still_leaves_the_coils_at_zero_and_off(coil_rig, probe):
 
 
 @pytest.mark.parametrize('params, message', [
-    ({'max_current': 40}, 'max_current'),                 # an integer for a double
+    ({'max_current': 'forty'}, "max_current: 'forty' is not a number"),
+    ({'retries': 2.5}, 'retries: 2.5 is not an integer'),
+    ({'max_field': float('nan')}, 'max_field: nan is not finite'),
     ({'max_current': 500.0}, 'max_current'),              # out of range
     ({'actuation_matrix': [1.0] * 9}, 'singular'),
     ({'polarity_mode': 'maybe'}, "polarity_mode 'maybe'"),
@@ -257,3 +263,76 @@ def test_bad_configuration_stops_the_node_with_the_reason(coil_rig, params, mess
     assert node.popen.wait(20) == 2, node.output()
     assert 'coils_node: not started' in node.output() and message in node.output()
     assert emulators.sets_since(0.0) == {'x': [], 'y': [], 'z': []}  # nothing reached a wire
+
+
+def test_integers_in_doubles_are_accepted_and_a_misspelt_parameter_is_named(coil_rig, probe):
+    matrix = [0.53e-3, 0, 0, 0, 1.07e-3, 0, 0, 0, 0.65e-3]  # as people write them
+    emulators, node = coil_rig('dxkdp', 115200, actuation_matrix=matrix, max_current=40,
+                               max_curent=1.0)
+    ready(emulators, probe)
+    assert drive(emulators, probe, [2e-3, 2e-3, 2e-3])
+    assert wait_for(lambda: 'max_curent is not a coils_node parameter (did you mean '
+                            'max_current?): ignored' in node.output()), node.output()
+
+
+def test_a_missing_params_file_is_named_and_nothing_starts(tmp_path):
+    from tentacle_sim.sim_rig import NodeProcess
+    missing = tmp_path / 'nowhere.yaml'
+    node = NodeProcess([sys.executable, '-m', 'tentacle_coils.coils_node', '--ros-args',
+                        '--params-file', str(missing)], str(tmp_path / 'node.log'))
+    assert node.popen.wait(20) == 2
+    assert f'params file {missing}: cannot be read' in node.output(), node.output()
+    assert 'Traceback' not in node.output()
+
+
+def test_signals_during_the_exit_ramp_change_nothing(coil_rig, probe):
+    emulators, node = coil_rig('dxkdp', 9600, slew_rate=5.0, watchdog_s=30.0)
+    ready(emulators, probe)
+    probe.command_field([5e-3, 0.0, 0.0])  # 9.4 A on x, ramped at 5 A/s
+    assert wait_for(lambda: emulators.setpoints()[0] > 8.0)
+    node.popen.send_signal(signal.SIGINT)
+    assert wait_for(lambda: emulators.setpoints()[0] < 6.0)  # the exit ramp runs
+    node.popen.send_signal(signal.SIGINT)  # the second Ctrl-C, mid-ramp
+    time.sleep(0.05)
+    node.popen.send_signal(signal.SIGTERM)
+    assert node.popen.poll() is None and emulators.setpoints()[0] > 0.0
+    assert node.stop(timeout_s=15.0) == 0, node.output()
+    assert 'already stopping safely' in node.output()
+    assert 'Traceback' not in node.output() and 'KeyboardInterrupt' not in node.output()
+    assert 'outputs zero and off' in node.output()
+    assert emulators.setpoints() == [0.0] * 3 and not any(emulators.outputs())
+
+
+def bank_value(probe, key, since):
+    array = probe.latest(probe.diagnostics, since)
+    if array is None:
+        return None
+    for status in array.status:
+        if status.name == 'coils: bank':
+            return {kv.key: kv.value for kv in status.values}.get(key), status
+    return None
+
+
+def test_a_killed_bank_process_is_replaced_and_the_coils_are_zero_and_off(coil_rig, probe):
+    emulators, node = coil_rig('dxkdp', 9600)
+    ready(emulators, probe)
+    probe.command_field([8e-3, -8e-3, 8e-3])
+    assert wait_for(lambda: emulators.setpoints()[0] > 15.0)
+    t0 = time.monotonic()
+    assert wait_for(lambda: bank_value(probe, 'bank_pid', t0) is not None)
+    pid = int(bank_value(probe, 'bank_pid', t0)[0])
+    os.kill(pid, signal.SIGKILL)
+    t_kill = time.monotonic()
+    assert wait_for(lambda: emulators.setpoints() == [0.0] * 3 and not any(emulators.outputs()),
+                    timeout_s=3.0)
+    assert time.monotonic() - t_kill < 1.5  # within 1 s, plus this probe's polling
+    assert node.popen.poll() is None
+    assert wait_for(lambda: 'coil bank process died (exit -9)' in node.output())
+    assert '[ERROR]' in node.output().split('coil bank process died')[0].splitlines()[-1]
+    assert wait_for(lambda: (bank_value(probe, 'bank_deaths', t_kill) or ('0',))[0] == '1')
+    assert bank_value(probe, 'bank_deaths', t_kill)[1].level == DiagnosticStatus.ERROR
+    probe.command_field([1e-3, 1e-3, 1e-3])
+    assert wait_for(lambda: 'outputs disabled' in node.output())  # refused until enabled
+    assert emulators.setpoints() == [0.0] * 3
+    assert probe.enable(True).success
+    assert drive(emulators, probe, [1e-3, 1e-3, 1e-3])

@@ -9,8 +9,10 @@ module only wires it to ROS.
 
 import logging
 import math
+import os
 import signal
 import sys
+import tempfile
 import threading
 import time
 
@@ -27,9 +29,10 @@ from std_msgs.msg import Bool
 from std_srvs.srv import SetBool
 
 from tentacle_coils.bank_process import BankClient
-from tentacle_coils.errors import CoilsError, CommandRejected
+from tentacle_coils.errors import CoilsError, CommandRejected, ConfigError
 from tentacle_coils.field_map import ActuationMap, Limits, plan_currents
-from tentacle_coils.params import COILS_PARAMS, describe
+from tentacle_coils.params import check_ros_args, COILS_PARAMS, describe
+import yaml
 
 FRAME_ID = 'coils'
 LEVELS = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN,
@@ -94,7 +97,8 @@ class CoilsNode(Node):
             polarity_mode=p['polarity_mode'], max_current_a=p['max_current'],
             slew_rate_a_per_s=p['slew_rate'], watchdog_s=p['watchdog_s'],
             readback_period_s=1.0 / p['publish_rate'], retries=p['retries'],
-            reply_timeout_s=p['reply_timeout_s'], voltage_limit_v=p['voltage_limit'])
+            reply_timeout_s=p['reply_timeout_s'], max_turnaround_s=p['max_turnaround_s'],
+            voltage_limit_v=p['voltage_limit'])
 
         self.currents_pub = self.create_publisher(Vector3Stamped, '/coils/currents', 10)
         self.field_pub = self.create_publisher(Vector3Stamped, '/coils/field', 10)
@@ -114,6 +118,9 @@ class CoilsNode(Node):
             f"slew {p['slew_rate']:g} A/s, watchdog {p['watchdog_s']:g} s")
 
     def _try_auto_enable(self):
+        if self.bank.deaths:  # after a bank process died only the operator enables
+            self._auto_enable_timer.cancel()
+            return
         if self.bank.connected() and not self.bank.estopped:
             ok, message = self.bank.enable(True)
             if ok:
@@ -188,7 +195,9 @@ class CoilsNode(Node):
         bank = DiagnosticStatus(name='coils: bank', hardware_id='coils',
                                 level=LEVELS[level], message=message)
         bank.values = [KeyValue(key='commands_rejected', value=str(self.rejected)),
-                       KeyValue(key='last_rejection', value=self.last_rejection)]
+                       KeyValue(key='last_rejection', value=self.last_rejection),
+                       KeyValue(key='bank_pid', value=str(self.bank.popen.pid)),
+                       KeyValue(key='bank_deaths', value=str(len(self.bank.deaths)))]
         array.status.append(bank)
         for snap in self.bank.snapshots():
             if not snap['connected']:
@@ -206,14 +215,15 @@ class CoilsNode(Node):
         self.diag_pub.publish(array)
 
     def shutdown(self):
-        """Ramp to zero and switch every output off; return True when confirmed."""
+        """Ramp to zero and switch every output off; return what was not read back so."""
         # The ROS context may be gone already (signal): log the ramp-down to stderr.
         logger = logging.getLogger('tentacle_coils')
         logger.removeHandler(self._log_handler)
         fallback = logging.StreamHandler(sys.stderr)
         logger.addHandler(fallback)
         try:
-            return self.bank.shutdown('node exit')
+            self.bank.shutdown('node exit')
+            return self.bank.unsafe
         finally:
             logger.removeHandler(fallback)
 
@@ -248,17 +258,59 @@ def spin_until_signal(node, poll_s=0.1):
     return received[0] if received else 0
 
 
+def _already_stopping(_signum, _frame):
+    """Say that a signal changes nothing now: the safe stop runs to its end."""
+    # os.write: a print here could re-enter the stderr buffer the main thread is writing to.
+    os.write(2, b'coils_node: already stopping safely (ramp to zero, outputs off): '
+                b'signal ignored\n')
+
+
+def _prepare_args(argv):
+    """
+    Check --ros-args against the parameter table before rcl reads them.
+
+    :return: (argv for rclpy, warnings, temporary files to remove after rclpy.init)
+    :raises ConfigError: a params file that is missing, unreadable or has a wrong type
+    """
+    checked, warnings, rewrite = check_ros_args(argv)
+    temporary = []
+    for index, document in rewrite.items():
+        handle = tempfile.NamedTemporaryFile('w', prefix='coils_node_params_', suffix='.yaml',
+                                             delete=False)
+        with handle:
+            yaml.safe_dump(document, handle)
+        temporary.append(handle.name)
+        checked[index] = handle.name
+    return checked, warnings, temporary
+
+
 def main(args=None):
     """Run the node; on exit (Ctrl-C, SIGTERM, error) leave the coils at zero and off."""
-    argv = sys.argv[1:] if args is None else args
+    argv = sys.argv[1:] if args is None else list(args)
     if '--help' in argv[:argv.index('--ros-args')] if '--ros-args' in argv else '--help' in argv:
         print('usage: coils_node [--ros-args --params-file FILE | -p NAME:=VALUE ...]\n\n'
               + __doc__ + '\nparameters:\n' + describe())
         return
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    temporary = []
+    try:
+        ros_argv, warnings, temporary = _prepare_args(argv)
+        rclpy.init(args=['coils_node', *ros_argv],
+                   signal_handler_options=SignalHandlerOptions.NO)
+    except ConfigError as exc:
+        print(f'coils_node: not started: {exc}', file=sys.stderr)
+        sys.exit(2)
+    except Exception as exc:  # rcl refused the arguments: its own message says why
+        print(f'coils_node: not started: the ROS arguments were refused: {exc}',
+              file=sys.stderr)
+        sys.exit(2)
+    finally:
+        for path in temporary:
+            os.unlink(path)
     node = None
     try:
         node = CoilsNode()
+        for warning in warnings:
+            node.get_logger().warning(warning)
         spin_until_signal(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -266,10 +318,13 @@ def main(args=None):
         print(f'coils_node: not started: {exc}', file=sys.stderr)
         sys.exit(2)
     finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, _already_stopping)
         if node is not None:
-            safe = node.shutdown()
-            print('coils_node: outputs ' + ('zero and off' if safe else
-                                            'NOT confirmed zero and off: check the supplies'),
+            unsafe = node.shutdown()
+            print('coils_node: outputs ' + ('zero and off' if not unsafe else
+                                            'NOT confirmed zero and off: ' + '; '.join(unsafe)
+                                            + ': check the supplies'),
                   file=sys.stderr, flush=True)
             node.destroy_node()
         rclpy.try_shutdown()

@@ -1,7 +1,9 @@
 """The bank in its own process, driven through BankClient, against emulated supplies."""
 
+import time
+
 import pytest
-from tentacle_coils.bank_process import BankClient
+from tentacle_coils.bank_process import BankClient, RESTARTS_MAX
 from tentacle_coils.errors import CoilsError, CommandRejected
 
 
@@ -70,12 +72,61 @@ def test_bad_configuration_is_reported():
                    slew_rate_a_per_s=1.0, watchdog_s=1.0)
 
 
-def test_a_crashed_bank_is_reported_not_hidden(client, wait_for):
+def outputs(emus):
+    return [emu.state()['output_on'] for emu in emus]
+
+
+@pytest.mark.parametrize('dialect', ['dxkdp', 'scpi'])
+def test_a_killed_bank_is_replaced_and_every_supply_is_zero_and_off_within_a_second(
+        emulate, wait_for, dialect):
+    emus = emulate(dialect, baud=9600)
+    rejected = []
+    bank = BankClient(on_rejected=rejected.append, ports=[e.port for e in emus],
+                      dialect=dialect, baud=9600,
+                      max_current_a=20.0, slew_rate_a_per_s=1000.0, watchdog_s=30.0)
+    try:
+        assert wait_for(bank.connected) and bank.enable(True)[0]
+        bank.command([15.6, -15.6, 4.0])
+        assert wait_for(lambda: setpoints(emus) == [15.6, -15.6, 4.0])
+        t_kill = time.monotonic()
+        bank.popen.kill()  # what the OOM killer or a crash would do
+        assert wait_for(lambda: setpoints(emus) == [0.0] * 3 and not any(outputs(emus)))
+        t_safe = time.monotonic() - t_kill
+        assert t_safe < 1.0, f'zero and off {t_safe:.2f} s after the bank died'
+        level, message = bank.status()
+        assert level == 'error' and 'died (exit -9)' in message
+        assert wait_for(bank.connected)
+        bank.command([1.0, 1.0, 1.0])  # reaches the new bank, which refuses it
+        assert wait_for(lambda: rejected) and 'outputs disabled' in rejected[-1]
+        time.sleep(0.3)
+        assert setpoints(emus) == [0.0] * 3 and not any(outputs(emus))
+        assert bank.enable(True)[0]
+        assert bank.status()[0] == 'ok'
+        bank.command([1.0, 1.0, 1.0])
+        assert wait_for(lambda: setpoints(emus) == [1.0, 1.0, 1.0])
+    finally:
+        assert bank.shutdown(timeout_s=5.0)
+
+
+def test_estop_is_carried_over_to_the_replacement_bank(client, wait_for):
     bank, emus, _ = client
+    bank.set_estop(True)
+    assert wait_for(lambda: not any(outputs(emus)))
     bank.popen.kill()
-    assert wait_for(lambda: bank.status()[0] == 'error')
-    assert 'exited unexpectedly' in bank.status()[1]
+    assert wait_for(bank.connected)
+    assert wait_for(lambda: 'estop' in bank.status()[1])
+    assert bank.enable(True)[0] is False  # estop still holds in the new bank
+    assert not any(outputs(emus))
+
+
+def test_a_bank_that_keeps_dying_is_not_replaced_for_ever(client, wait_for):
+    bank, emus, _ = client
+    for _ in range(RESTARTS_MAX + 1):
+        assert wait_for(bank.connected)
+        dead = bank.popen
+        dead.kill()
+        assert wait_for(lambda: bank.popen is not dead or 'not restarted' in bank.status()[1])
+    assert wait_for(lambda: 'not restarted' in bank.status()[1])
     assert not bank.connected()
-    assert all(not snap['connected'] for snap in bank.snapshots())
     with pytest.raises(CommandRejected, match='not running'):
         bank.command([1.0, 0.0, 0.0])

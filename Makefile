@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: venv demo test test-fast lint build bench bench-model clean
+.PHONY: venv demo test test-fast lint build bench bench-model campaign clean
 
 venv: $(STAMP)
 
@@ -35,6 +35,10 @@ build: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) bench/coils_rate.py
+
+# The coil driver's reliability campaign: every fault and signal, timed, what reached the wire.
+campaign: $(STAMP)
+	$(PY) tests/fault_campaign.py
 
 # The statics speed/accuracy trade against the PyElastica peer, in a bench-only venv.
 VENV_BENCH := .venv-bench

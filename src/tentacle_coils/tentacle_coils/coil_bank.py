@@ -71,6 +71,7 @@ class Channel:
         self.updates = 0
         self.faults = 0
         self._unreachable_logged = False
+        self._force_off = False
         # Line-clock times (supply.line.now()): the slew reference is when the previous set
         # left the line, or when the target left rest, whichever is later.
         self._t_ref = -math.inf
@@ -84,8 +85,12 @@ class Channel:
         return f'{self.name} ({self.supply.line.path})'
 
     # -- called from other threads ----------------------------------------------------------
-    def request(self, target_a=None, output=None):
-        """Set the target current (A) and/or the wanted output state; returns at once."""
+    def request(self, target_a=None, output=None, force_off=False):
+        """
+        Set the target current (A) and/or the wanted output state; returns at once.
+
+        An output is switched off once its current is at zero, unless ``force_off``.
+        """
         with self._cond:
             if target_a is not None:
                 if self.target_a == self.sent_a:
@@ -95,6 +100,7 @@ class Channel:
                 self.target_a = float(target_a)
             if output is not None:
                 self.output_wanted = bool(output)
+                self._force_off = force_off
             self._cond.notify()
 
     def settled_zero(self):
@@ -189,6 +195,7 @@ class Channel:
         try:
             self.supply.line.open()
             identity = self.supply.connect()
+            held_a, output_on = self.supply.read_held()
         except (LinkLost, SupplyFault) as exc:
             self.supply.line.close()
             with self._cond:
@@ -200,16 +207,24 @@ class Channel:
         self._unreachable_logged = False
         with self._cond:
             self.connected = True
-            self.sent_a = 0.0  # connect() drove the device to zero
-            self.output_on = None
+            # Go on from what the device holds (a reconnected supply may still carry its
+            # old current): targets are zero after a fault, so it ramps down from there.
+            self.sent_a, self.output_on = held_a, output_on
+            self.held = (held_a, output_on)
             self.confirmed = False
+            self._t_ref = self.supply.line.now()
             self._next_readback = self._next_verify = 0.0
         log.info('supply %s connected: %s', self.label, identity)
         return True
 
+    def _output_due(self):
+        """Return whether the output should switch now: on at once, off at zero current."""
+        return self.output_on != self.output_wanted and (
+            self.output_wanted or self.sent_a == 0.0 or self._force_off)
+
     def _due_in(self, now):
         """Return seconds until there is work (<= 0: now); call with the lock held."""
-        if self.target_a != self.sent_a or self.output_on != self.output_wanted:
+        if self.target_a != self.sent_a or self._output_due():
             return 0.0
         if self.target_a == 0.0 and not self.confirmed:
             return 0.0  # a safe state is confirmed by read-back as soon as it is reached
@@ -237,10 +252,10 @@ class Channel:
                 if wait <= 0:
                     break
                 self._cond.wait(wait)
-            target, wanted = self.target_a, self.output_wanted
+            target, wanted, switch = self.target_a, self.output_wanted, self._output_due()
         if self._stop.is_set():
             return
-        if self.output_on != wanted:
+        if switch:
             self.supply.set_output(wanted)
             with self._cond:
                 self.output_on = wanted
@@ -497,10 +512,10 @@ class CoilBank:
                         channel.request(target_a=0.0)
                     log.warning('coils: watchdog, no command for %.3g s: ramping to zero',
                                 self.watchdog_s)
-                if self._stopping and (now > self._stop_deadline or all(
-                        ch.settled_zero() for ch in self.channels)):
+                late = now > self._stop_deadline
+                if self._stopping and (late or all(ch.settled_zero() for ch in self.channels)):
                     for channel in self.channels:
-                        channel.request(output=False)
+                        channel.request(output=False, force_off=late)
                     self._stopping = ''
                 if (self._fault and self.connected()
                         and all(ch.settled_zero() for ch in self.channels)):
@@ -529,7 +544,7 @@ class CoilBank:
                 ch.settled_zero() for ch in self.channels):
             time.sleep(0.005)
         for channel in self.channels:
-            channel.request(output=False)
+            channel.request(output=False, force_off=True)  # off is safer than on at any current
         while time.monotonic() < deadline + 1.0 and not all(
                 ch.settled_off() for ch in self.channels):
             time.sleep(0.005)

@@ -228,6 +228,13 @@ class CoilsNode(Node):
             logger.removeHandler(fallback)
 
 
+def _already_stopping(_signum, _frame):
+    """Say that a signal changes nothing now: the safe stop runs to its end."""
+    # os.write: a print here could re-enter the stderr buffer the main thread is writing to.
+    os.write(2, b'coils_node: already stopping safely (ramp to zero, outputs off): '
+                b'signal ignored\n')
+
+
 def spin_until_signal(node, poll_s=0.1):
     """
     Spin until SIGINT or SIGTERM (or the context ends); return the signal number or 0.
@@ -235,12 +242,16 @@ def spin_until_signal(node, poll_s=0.1):
     rclpy's own handlers shut the context down and then raise KeyboardInterrupt at whatever
     bytecode is running; if that is a destructor the exception is swallowed and the next
     wait fails on the dead context. Here a signal only sets a flag, so the executor stops
-    between callbacks and the context stays valid for the safe stop that follows.
+    between callbacks and the context stays valid for the safe stop that follows. From the
+    first signal on, further ones only print a note (there is no moment in between when a
+    second signal could end the process mid-stop).
     """
     stop = threading.Event()
     received = []
 
     def on_signal(signum, _frame):
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, _already_stopping)
         received.append(signum)
         stop.set()
 
@@ -253,16 +264,10 @@ def spin_until_signal(node, poll_s=0.1):
     finally:
         executor.remove_node(node)
         executor.shutdown()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+        if not received:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
     return received[0] if received else 0
-
-
-def _already_stopping(_signum, _frame):
-    """Say that a signal changes nothing now: the safe stop runs to its end."""
-    # os.write: a print here could re-enter the stderr buffer the main thread is writing to.
-    os.write(2, b'coils_node: already stopping safely (ramp to zero, outputs off): '
-                b'signal ignored\n')
 
 
 def _prepare_args(argv):

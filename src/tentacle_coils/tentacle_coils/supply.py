@@ -90,7 +90,12 @@ class Supply:
                           f'{last}')
 
     def connect(self):
-        """Check the device answers and drive it to zero current; return its identity."""
+        """
+        Check the device answers and program its limits; return its identity.
+
+        The current it holds is left as it is: read_held() tells it, and the channel ramps
+        it to zero at the slew limit (a jump to zero in a big coil is a step too).
+        """
         raise NotImplementedError
 
     def set_output(self, on):
@@ -135,6 +140,7 @@ class DxkdpSupply(Supply):
             raise ConfigError(f"dxkdp polarity_mode '{polarity_mode}' is not signed or command")
         self.signed = polarity_mode == 'signed'
         self._positive = None  # device polarity in command mode; None: unknown
+        self._magnitude_a = 0.0  # current magnitude last set in command mode (A)
 
     def _exchange(self, frame, verify=None):
         """Send one request; return None for an ACKed set, the reply Frame for a read."""
@@ -177,16 +183,19 @@ class DxkdpSupply(Supply):
         return ''
 
     def connect(self):
-        """Read the state (presence), program the voltage limit and zero current."""
+        """Read the state (presence) and program the voltage limit; see Supply.connect."""
         self.line.discard_input()
         self._out_of_step = False
         state = self._read_state()
+        # First-generation units do not report their polarity: until a set at zero fixes
+        # it, only the magnitude changes, so a current found here ramps down as it flows.
         self._positive = None
+        self._magnitude_a = abs(state.current_a)
         self._exchange(dxkdp.set_voltage(self.address, self.voltage_limit_v),
                        lambda: self._state_differs(voltage_v=self.voltage_limit_v))
-        self.set_current(0.0)
         output = 'on' if state.output_on else 'off'
-        self.identity = f'dxkdp address {self.address} (output {output})'
+        self.identity = f'dxkdp address {self.address} (output {output}, ' \
+                        f'{state.current_a:.2f} A)'
         return self.identity
 
     def set_output(self, on):
@@ -202,11 +211,17 @@ class DxkdpSupply(Supply):
                            lambda: self._state_differs(current_a=device_a))
             return
         positive = device_a >= 0
-        if positive != self._positive:
+        if positive != self._positive and (self._positive is not None
+                                           or self._magnitude_a == 0.0):
+            if self._magnitude_a != 0.0:  # polarity changes at zero only: no current step
+                self._exchange(dxkdp.set_current(self.address, 0.0),
+                               lambda: self._state_differs(current_a=0.0))
+                self._magnitude_a = 0.0
             self._exchange(dxkdp.set_polarity(self.address, positive, positive))
             self._positive = positive
         self._exchange(dxkdp.set_current(self.address, abs(device_a)),
                        lambda: self._state_differs(current_a=abs(device_a)))
+        self._magnitude_a = abs(device_a)
 
     def _coil_frame(self, device_a):
         if not self.signed and self._positive is False:
@@ -243,14 +258,11 @@ class ScpiSupply(Supply):
         return self._attempts(request.decode('ascii').strip(), attempt)
 
     def connect(self):
-        """Identify the device, drain its error queue and zero the current."""
+        """Identify the device and drain its error queue; see Supply.connect."""
         self.line.discard_input()
         self._out_of_step = False
         maker, model, serial_no, firmware = self._query(scpi.identify(), scpi.parse_identity)
         self.errors()
-        self.set_current(0.0)
-        if self.read_setpoint() != 0.0:
-            raise SupplyFault(f'{self.line.path}: setpoint did not reach zero at connect')
         self.identity = f'{maker} {model} s/n {serial_no} fw {firmware}'
         return self.identity
 

@@ -35,11 +35,32 @@ def test_dxkdp_signed_currents_reach_the_coil_in_both_generations(emulate, mode,
     supply.line.close()
 
 
-def test_dxkdp_connect_programs_voltage_limit_and_zero(emulate):
+def test_dxkdp_connect_programs_the_voltage_limit_and_reports_what_is_held(emulate):
     emu, = emulate('dxkdp', names='x', baud=115200)
-    emu.load.drive(setpoint_a=3.0)  # a stale setpoint left from an earlier session
-    connected(emu, 'dxkdp', 115200, voltage_limit_v=24.0).line.close()
-    assert emu.state()['voltage_limit_v'] == 24.0 and emu.state()['setpoint_a'] == 0.0
+    emu.load.drive(setpoint_a=3.0, output_on=True)  # left from an earlier session
+    supply = connected(emu, 'dxkdp', 115200, voltage_limit_v=24.0)
+    assert emu.state()['voltage_limit_v'] == 24.0
+    assert supply.read_held() == (pytest.approx(3.0), True)  # the channel ramps it down
+    supply.line.close()
+
+
+def test_first_generation_polarity_changes_only_at_zero(emulate):
+    emu, = emulate('dxkdp', names='x', baud=115200, polarity_mode='command')
+    earlier = connected(emu, 'dxkdp', 115200, polarity_mode='command')
+    earlier.set_output(True)
+    earlier.set_current(-2.0)  # an earlier session left the unit at -2 A
+    earlier.line.close()
+    supply = connected(emu, 'dxkdp', 115200, polarity_mode='command')  # polarity unknown
+    for magnitude_a in (1.5, 0.5, 0.0):  # the channel ramps |2 A| down as it flows
+        supply.set_current(magnitude_a)
+        assert emu.state()['setpoint_a'] == pytest.approx(-magnitude_a)
+    supply.set_current(1.0)  # from zero, the polarity is set first
+    assert emu.state()['setpoint_a'] == pytest.approx(1.0)
+    supply.set_current(-1.0)  # a direct change of sign goes through zero, never jumps
+    assert emu.state()['setpoint_a'] == pytest.approx(-1.0)
+    values = [e.get('current_a') for e in emu.log if 'current_a' in e]
+    assert values[-2:] == [0.0, -1.0] or values[-3:-1] == [0.0, 0.0]
+    supply.line.close()
 
 
 @pytest.mark.parametrize('kind', ['nak', 'garble', 'no_reply', 'late'])

@@ -24,8 +24,8 @@ tests/test_fault_campaign.py runs every scenario as a test.
 from dataclasses import dataclass, field
 import math
 import os
-import re
 import pathlib
+import re
 import signal
 import sys
 import tempfile
@@ -38,7 +38,7 @@ import conftest  # noqa: E402,F401  (the root one: source paths, as for the test
 sys.path.insert(0, str(HERE))
 from rig_support import ROOT, wait_for  # noqa: E402  (before rclpy: the private domain)
 
-from rig_probe import RigProbe  # noqa: E402
+from rig_probe import RigProbe  # noqa: E402,I100  (imports rclpy: after rig_support)
 from tentacle_sim.sim_rig import CoilRig  # noqa: E402
 
 SLEW_A_PER_S = 50.0
@@ -211,7 +211,7 @@ def wire_report(outcome, rig, t0, refused=None):
 
 # -- scenarios --------------------------------------------------------------------------------
 def transient(kind, **options):
-    """A fault on y for a few commands: retried, the stream keeps landing, no fault raised."""
+    """Fault y for a few commands: retried, the stream keeps landing, no fault raised."""
     def run(rig, name):
         out = Outcome(name)
         t0 = time.monotonic()
@@ -243,7 +243,7 @@ def transient(kind, **options):
 
 
 def persistent(kind, axis='y', **options):
-    """A fault that outlasts the retries: every axis to zero, refused, then recovered."""
+    """Fault a supply past its retries: every axis to zero, refused, then recovered."""
     def run(rig, name):
         out = Outcome(name)
         t0 = time.monotonic()
@@ -370,7 +370,7 @@ def stop_by(signals, expect='clean'):
 
 
 def scpi_lost_set(rig, name):
-    """The set that ends a ramp on x is lost (SCPI sets get no reply): found by read-back."""
+    """Lose the set that ends a ramp on x (SCPI sets get no reply): found by read-back."""
     out = Outcome(name)
     rig.stream.running.clear()
     time.sleep(0.2)
@@ -389,7 +389,7 @@ def scpi_lost_set(rig, name):
 
 
 def scpi_error_queue(rig, name):
-    """An error entry in x's SCPI queue: reported, setpoint reasserted."""
+    """Queue an error in x's SCPI error queue: reported, setpoint reasserted."""
     out = Outcome(name)
     t0 = time.monotonic()
     rig.emulators.fault('x', 'error', count=1, code=-300, text='Device-specific error')

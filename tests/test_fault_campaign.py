@@ -5,8 +5,8 @@ Every fault the emulators offer and every signal, each with what must hold: read
 emulated devices, never from the node. `make campaign` prints the same as a table.
 """
 
-import pytest
 from fault_campaign import groups, run_group, table
+import pytest
 
 pytestmark = pytest.mark.ros
 

@@ -312,10 +312,11 @@ class Channel:
                                 f'{"on" if self.output_on else "off"}')
                 self.output_on = output_on
             self.confirmed = len(problems) == len(errors)
+            text, repeated = '; '.join(problems), '; '.join(problems) == self.last_error
             if problems:
-                self.last_error = '; '.join(problems)
-        if problems:
-            log.warning('supply %s reports %s; setpoint re-sent', self.label, '; '.join(problems))
+                self.last_error = text
+        if problems and not repeated:  # a device that keeps disagreeing is logged once
+            log.warning('supply %s reports %s; setpoint re-sent', self.label, text)
             if self.confirmed:  # device errors only: the held state is right, assert it again
                 self.supply.set_current(self.sent_a)
                 self._t_ref = self.supply.line.tx_free_at

@@ -36,7 +36,7 @@ import threading
 import time
 
 from tentacle_coils.coil_bank import build_bank
-from tentacle_coils.errors import CoilsError, CommandRejected
+from tentacle_coils.errors import CoilsError, CommandRejected, DriverError
 
 STATE_PERIOD_S = 0.02
 REPLY_TIMEOUT_S = 2.0
@@ -96,7 +96,7 @@ def serve(stdin=sys.stdin, stdout=sys.stdout, terminate=None):
         return 2
     try:
         bank = build_bank(**first['bank'])
-    except (CoilsError, TypeError, KeyError) as exc:
+    except (DriverError, TypeError, KeyError) as exc:
         emit(ev='stopped', safe=False, error=f'bank config: {exc}')
         return 2
     logger = logging.getLogger('tentacle_coils')

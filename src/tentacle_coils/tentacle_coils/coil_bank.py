@@ -26,7 +26,7 @@ import numpy as np
 
 from tentacle_coils.errors import CommandRejected, ConfigError, LinkLost, SupplyFault
 from tentacle_coils.supply import make_supply
-from tentacle_coils.transport import SerialLine
+from tentacle_common.serial_line import SerialLine
 
 log = logging.getLogger('tentacle_coils')
 

@@ -9,67 +9,29 @@ module only wires it to ROS.
 
 import logging
 import math
-import os
-import signal
 import sys
-import tempfile
-import threading
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Vector3Stamped
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 import rclpy
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Bool
 from std_srvs.srv import SetBool
 
 from tentacle_coils.bank_process import BankClient
-from tentacle_coils.errors import CoilsError, CommandRejected, ConfigError
+from tentacle_coils.errors import CommandRejected
 from tentacle_coils.field_map import ActuationMap, Limits, plan_currents
-from tentacle_coils.params import check_ros_args, COILS_PARAMS, describe
-import yaml
+from tentacle_coils.params import COILS_PARAMS, describe, NODE_NAME
+from tentacle_common.driver_node import (declare_parameters, diagnostic_status,
+                                         ignore_further_signals, init_checked, RosLogHandler,
+                                         spin_until_signal, wants_help)
+from tentacle_common.errors import ConfigError, DriverError
 
 FRAME_ID = 'coils'
-LEVELS = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN,
-          'error': DiagnosticStatus.ERROR}
-
-
-def declare_parameters(node, table):
-    """Declare every row of a parameter table with a descriptor; return {name: value}."""
-    values = {}
-    for p in table:
-        descriptor = ParameterDescriptor(description=p.description, read_only=True)
-        if p.low is not None and isinstance(p.default, float):
-            descriptor.floating_point_range = [FloatingPointRange(
-                from_value=float(p.low), to_value=float(p.high), step=0.0)]
-        elif p.low is not None and isinstance(p.default, int):
-            descriptor.integer_range = [IntegerRange(
-                from_value=int(p.low), to_value=int(p.high), step=1)]
-        values[p.name] = node.declare_parameter(p.name, p.default, descriptor).value
-    return values
-
-
-class RosLogHandler(logging.Handler):
-    """Forward the pure code's Python logging to the node's ROS logger."""
-
-    def __init__(self, ros_logger):
-        """Wrap a ROS logger."""
-        super().__init__()
-        self.ros_logger = ros_logger
-
-    def emit(self, record):
-        """Log one record at the matching ROS severity."""
-        if record.levelno >= logging.ERROR:
-            self.ros_logger.error(self.format(record))
-        elif record.levelno >= logging.WARNING:
-            self.ros_logger.warning(self.format(record))
-        else:
-            self.ros_logger.info(self.format(record))
 
 
 class CoilsNode(Node):
@@ -77,7 +39,7 @@ class CoilsNode(Node):
 
     def __init__(self):
         """Declare parameters, build the bank and start talking to the supplies."""
-        super().__init__('coils_node')
+        super().__init__(NODE_NAME)
         p = declare_parameters(self, COILS_PARAMS)
         self.actuation = ActuationMap(p['actuation_matrix'], p['field_offset'])
         self.limits = Limits(p['max_current'], p['max_field'], p['clamp'])
@@ -192,13 +154,10 @@ class CoilsNode(Node):
         array = DiagnosticArray()
         array.header.stamp = self.get_clock().now().to_msg()
         level, message = self.bank.status()
-        bank = DiagnosticStatus(name='coils: bank', hardware_id='coils',
-                                level=LEVELS[level], message=message)
-        bank.values = [KeyValue(key='commands_rejected', value=str(self.rejected)),
-                       KeyValue(key='last_rejection', value=self.last_rejection),
-                       KeyValue(key='bank_pid', value=str(self.bank.popen.pid)),
-                       KeyValue(key='bank_deaths', value=str(len(self.bank.deaths)))]
-        array.status.append(bank)
+        array.status.append(diagnostic_status(
+            'coils: bank', 'coils', level, message,
+            {'commands_rejected': self.rejected, 'last_rejection': self.last_rejection,
+             'bank_pid': self.bank.popen.pid, 'bank_deaths': len(self.bank.deaths)}))
         for snap in self.bank.snapshots():
             if not snap['connected']:
                 level, message = 'error', f"disconnected: {snap['last_error']}"
@@ -206,12 +165,9 @@ class CoilsNode(Node):
                 level, message = 'warn', f"last error: {snap['last_error']}"
             else:
                 level, message = 'ok', 'connected'
-            status = DiagnosticStatus(
-                name=f"coils: supply {snap['axis']}",
-                hardware_id=f"{snap['port']}@{snap['address']}", level=LEVELS[level],
-                message=message)
-            status.values = [KeyValue(key=k, value=str(v)) for k, v in snap.items()]
-            array.status.append(status)
+            array.status.append(diagnostic_status(
+                f"coils: supply {snap['axis']}", f"{snap['port']}@{snap['address']}", level,
+                message, snap))
         self.diag_pub.publish(array)
 
     def shutdown(self):
@@ -228,89 +184,18 @@ class CoilsNode(Node):
             logger.removeHandler(fallback)
 
 
-def _already_stopping(_signum, _frame):
-    """Say that a signal changes nothing now: the safe stop runs to its end."""
-    # os.write: a print here could re-enter the stderr buffer the main thread is writing to.
-    os.write(2, b'coils_node: already stopping safely (ramp to zero, outputs off): '
-                b'signal ignored\n')
-
-
-def spin_until_signal(node, poll_s=0.1):
-    """
-    Spin until SIGINT or SIGTERM (or the context ends); return the signal number or 0.
-
-    rclpy's own handlers shut the context down and then raise KeyboardInterrupt at whatever
-    bytecode is running; if that is a destructor the exception is swallowed and the next
-    wait fails on the dead context. Here a signal only sets a flag, so the executor stops
-    between callbacks and the context stays valid for the safe stop that follows. From the
-    first signal on, further ones only print a note (there is no moment in between when a
-    second signal could end the process mid-stop).
-    """
-    stop = threading.Event()
-    received = []
-
-    def on_signal(signum, _frame):
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, _already_stopping)
-        received.append(signum)
-        stop.set()
-
-    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
-    executor = SingleThreadedExecutor(context=node.context)
-    executor.add_node(node)
-    try:
-        while not stop.is_set() and node.context.ok():
-            executor.spin_once(timeout_sec=poll_s)
-    finally:
-        executor.remove_node(node)
-        executor.shutdown()
-        if not received:
-            for sig, handler in previous.items():
-                signal.signal(sig, handler)
-    return received[0] if received else 0
-
-
-def _prepare_args(argv):
-    """
-    Check --ros-args against the parameter table before rcl reads them.
-
-    :return: (argv for rclpy, warnings, temporary files to remove after rclpy.init)
-    :raises ConfigError: a params file that is missing, unreadable or has a wrong type
-    """
-    checked, warnings, rewrite = check_ros_args(argv)
-    temporary = []
-    for index, document in rewrite.items():
-        handle = tempfile.NamedTemporaryFile('w', prefix='coils_node_params_', suffix='.yaml',
-                                             delete=False)
-        with handle:
-            yaml.safe_dump(document, handle)
-        temporary.append(handle.name)
-        checked[index] = handle.name
-    return checked, warnings, temporary
-
-
 def main(args=None):
     """Run the node; on exit (Ctrl-C, SIGTERM, error) leave the coils at zero and off."""
     argv = sys.argv[1:] if args is None else list(args)
-    if '--help' in argv[:argv.index('--ros-args')] if '--ros-args' in argv else '--help' in argv:
+    if wants_help(argv):
         print('usage: coils_node [--ros-args --params-file FILE | -p NAME:=VALUE ...]\n\n'
               + __doc__ + '\nparameters:\n' + describe())
         return
-    temporary = []
     try:
-        ros_argv, warnings, temporary = _prepare_args(argv)
-        rclpy.init(args=['coils_node', *ros_argv],
-                   signal_handler_options=SignalHandlerOptions.NO)
+        warnings = init_checked(argv, NODE_NAME, COILS_PARAMS)
     except ConfigError as exc:
         print(f'coils_node: not started: {exc}', file=sys.stderr)
         sys.exit(2)
-    except Exception as exc:  # rcl refused the arguments: its own message says why
-        print(f'coils_node: not started: the ROS arguments were refused: {exc}',
-              file=sys.stderr)
-        sys.exit(2)
-    finally:
-        for path in temporary:
-            os.unlink(path)
     node = None
     try:
         node = CoilsNode()
@@ -319,12 +204,11 @@ def main(args=None):
         spin_until_signal(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (CoilsError, ParameterException) as exc:
+    except (DriverError, ParameterException) as exc:
         print(f'coils_node: not started: {exc}', file=sys.stderr)
         sys.exit(2)
     finally:
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, _already_stopping)
+        ignore_further_signals(NODE_NAME)
         if node is not None:
             unsafe = node.shutdown()
             print('coils_node: outputs ' + ('zero and off' if not unsafe else

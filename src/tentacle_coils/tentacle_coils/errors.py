@@ -1,33 +1,25 @@
-"""Exceptions of the coil driver: one root, a few specific kinds."""
+"""
+Exceptions of the coil driver: one root, a few specific kinds.
+
+The line's failures and bad configuration are tentacle_common's (every driver shares
+them) and are re-exported here; CoilsError and the common ones share DriverError as root.
+"""
+
+from tentacle_common.errors import (  # noqa: F401 (re-exported)
+    ConfigError, DriverError, ExchangeFailed, FrameError, LinkLost, Refused, ReplyTimeout)
 
 
-class CoilsError(Exception):
-    """Root of every error raised by tentacle_coils."""
-
-
-class ConfigError(CoilsError):
-    """A configuration value is missing, malformed or out of range."""
+class CoilsError(DriverError):
+    """Root of the errors only the coil driver raises."""
 
 
 class CommandRejected(CoilsError):
     """A field or current command failed validation and was not sent."""
 
 
-class FrameError(CoilsError):
-    """Bytes on the wire do not form a valid frame or reply (garbled, bad checksum)."""
-
-
-class NakError(CoilsError):
+class NakError(CoilsError, Refused):
     """The device answered a set command with NAK."""
 
 
-class ReplyTimeout(CoilsError):
-    """No complete reply arrived before the deadline."""
-
-
-class LinkLost(CoilsError):
-    """The serial line is gone (device unplugged, port closed, I/O error)."""
-
-
-class SupplyFault(CoilsError):
+class SupplyFault(CoilsError, ExchangeFailed):
     """A command still failed after its bounded retries."""

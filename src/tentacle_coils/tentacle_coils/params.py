@@ -3,33 +3,18 @@ The coils node's parameters, in one table: name, default, range, unit, descripti
 
 Plain data (no rclpy): the node declares every row with a descriptor, ``coils_node --help``
 prints the table, and tests read it. Names are those of DESIGN.md; units are in the
-descriptions. ROS parameters are typed; integers given for doubles (40 for 40.0, also in
-arrays) are converted before rcl reads them (``check_ros_args``), and a misspelt name is
-warned about, naming it.
+descriptions. What a lab writes is checked against it before rcl reads it
+(tentacle_common.params): integers given for doubles (40 for 40.0, also in arrays) are
+converted, and a misspelt name is warned about, naming it.
 """
 
-from dataclasses import dataclass
-import difflib
-import json
-import pathlib
+from tentacle_common import params as common
+from tentacle_common.params import Param
 
-from tentacle_coils.errors import ConfigError
-import yaml
-
+NODE_NAME = 'coils_node'
 REFERENCE_MATRIX_T_PER_A = (0.53e-3, 0.0, 0.0,
                             0.0, 1.07e-3, 0.0,
                             0.0, 0.0, 0.65e-3)
-
-
-@dataclass(frozen=True)
-class Param:
-    """One parameter: its default fixes its type; low/high bound numbers (inclusive)."""
-
-    name: str
-    default: object
-    description: str
-    low: float | None = None
-    high: float | None = None
 
 
 COILS_PARAMS = (
@@ -71,157 +56,16 @@ COILS_PARAMS = (
 )
 
 
-def describe(params=COILS_PARAMS):
+def describe():
     """Return the table as text for ``--help``."""
-    lines = []
-    for p in params:
-        bounds = f' [{p.low:g}, {p.high:g}]' if p.low is not None else ''
-        lines.append(f'  {p.name} (default {p.default!r}){bounds}\n      {p.description}')
-    return '\n'.join(lines)
+    return common.describe(COILS_PARAMS)
 
 
-# -- checking what a lab writes, before rcl reads it ---------------------------------------
-MAX_EXACT_INT = 2 ** 53  # integers up to this convert to doubles exactly
+def check_params_file(path):
+    """Check a params file against the table; see tentacle_common.params."""
+    return common.check_params_file(path, NODE_NAME, COILS_PARAMS)
 
 
-def _coerce(p, value):
-    """
-    Return value as the type of p's default, converting only where that is exact.
-
-    Integers are accepted for doubles, also inside arrays (rcl refuses a sequence that
-    mixes 0 and 0.53e-3), and numbers PyYAML reads as text (``5e-3`` has no dot) as well.
-
-    :raises ValueError: a value of another type, or a double that is not finite
-    """
-    def as_double(v):
-        if isinstance(v, bool):
-            raise ValueError(f'{v!r} is not a number')
-        if isinstance(v, int):
-            if abs(v) > MAX_EXACT_INT:
-                raise ValueError(f'{v} is too large to be a double exactly')
-            return float(v)
-        if isinstance(v, str):
-            try:
-                v = float(v)
-            except ValueError:
-                raise ValueError(f'{v!r} is not a number') from None
-        if not isinstance(v, float):
-            raise ValueError(f'{v!r} is not a number')
-        if v != v or v in (float('inf'), float('-inf')):
-            raise ValueError(f'{v} is not finite')
-        return v
-
-    def exact(kind, v):
-        if kind is float:
-            return as_double(v)
-        if type(v) is not kind:  # bool is an int in Python, not in ROS
-            raise ValueError(f'{v!r} is not {"an integer" if kind is int else kind.__name__}')
-        return v
-
-    if isinstance(p.default, list):
-        if not isinstance(value, list):
-            raise ValueError(f'{value!r} is not a list')
-        return [exact(type(p.default[0]), v) for v in value]
-    return exact(type(p.default), value)
-
-
-def _suggestion(name, table):
-    close = difflib.get_close_matches(name, [p.name for p in table], n=1)
-    return f' (did you mean {close[0]}?)' if close else ''
-
-
-def _own_section(section, node_name):
-    """Return 'node' for this node's own section, 'all' for a wildcard, '' otherwise."""
-    name = str(section).lstrip('/')
-    if name == node_name or name.endswith('/' + node_name):
-        return 'node'
-    return 'all' if name in ('**', '*') else ''
-
-
-def check_params_file(path, node_name='coils_node', table=COILS_PARAMS):
-    """
-    Read a ROS params file and check this node's parameters in it against the table.
-
-    :return: (the document, with integers in double parameters made doubles; warnings, one
-        per unknown parameter in this node's section; whether anything was converted)
-    :raises ConfigError: the file is missing, unreadable or not a params file, or a
-        parameter has a value of the wrong type; the message names the file and parameter
-    """
-    try:
-        text = pathlib.Path(path).read_text(encoding='utf-8')
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f'params file {path}: cannot be read: '
-                          f'{getattr(exc, "strerror", None) or exc}') from None
-    try:
-        document = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ConfigError(f'params file {path}: not YAML: {exc}') from None
-    if not isinstance(document, dict):
-        raise ConfigError(f'params file {path}: not a mapping of node names to '
-                          'ros__parameters')
-    by_name = {p.name: p for p in table}
-    warnings, changed = [], False
-    for section, body in document.items():
-        kind = _own_section(section, node_name)
-        if not kind:
-            continue
-        params = body.get('ros__parameters') if isinstance(body, dict) else None
-        if not isinstance(params, dict):
-            raise ConfigError(f'params file {path}: {section}: no ros__parameters mapping')
-        for name, value in params.items():
-            p = by_name.get(name)
-            if p is None:
-                if kind == 'node':
-                    warnings.append(f'params file {path}: {name} is not a {node_name} '
-                                    f'parameter{_suggestion(name, table)}: ignored')
-                continue
-            try:
-                coerced = _coerce(p, value)
-            except ValueError as exc:
-                raise ConfigError(f'params file {path}: {name}: {exc}') from None
-            if coerced != value or type(coerced) is not type(value) or (
-                    isinstance(value, list) and any(
-                        type(a) is not type(b) for a, b in zip(coerced, value))):
-                params[name] = coerced
-                changed = True
-    return document, warnings, changed
-
-
-def check_ros_args(argv, node_name='coils_node', table=COILS_PARAMS):
-    """
-    Check the parameters that ``--ros-args`` give: params files and ``-p NAME:=VALUE``.
-
-    :param argv: the command line after the program name
-    :return: (argv to hand to rclpy, warnings, {index in argv: normalised params document}
-        for each params file that needed conversions: write it out and put its path there)
-    :raises ConfigError: see check_params_file; also a -p value of the wrong type
-    """
-    argv = list(argv)
-    warnings, rewrite = [], {}
-    by_name = {p.name: p for p in table}
-    in_ros_args = False
-    for i, arg in enumerate(argv):
-        if arg == '--ros-args':
-            in_ros_args = True
-        elif arg == '--':
-            in_ros_args = False
-        elif in_ros_args and arg == '--params-file' and i + 1 < len(argv):
-            document, found, changed = check_params_file(argv[i + 1], node_name, table)
-            warnings += found
-            if changed:
-                rewrite[i + 1] = document
-        elif in_ros_args and arg in ('-p', '--param') and i + 1 < len(argv):
-            name, sep, text = argv[i + 1].partition(':=')
-            owner, _, name = name.rpartition(':')
-            if not sep or owner not in ('', node_name):
-                continue
-            if name not in by_name:
-                warnings.append(f'-p {name}: not a {node_name} parameter'
-                                f'{_suggestion(name, table)}: ignored')
-                continue
-            try:
-                value = _coerce(by_name[name], yaml.safe_load(text))
-            except (ValueError, yaml.YAMLError) as exc:
-                raise ConfigError(f'-p {name}: {exc}') from None
-            argv[i + 1] = f'{owner + ":" if owner else ""}{name}:=' + json.dumps(value)
-    return argv, warnings, rewrite
+def check_ros_args(argv):
+    """Check --ros-args against the table; see tentacle_common.params."""
+    return common.check_ros_args(argv, NODE_NAME, COILS_PARAMS)

@@ -9,7 +9,8 @@ the other way round.
 """
 
 from tentacle_coils import dxkdp, scpi
-from tentacle_coils.errors import ConfigError, FrameError, NakError, ReplyTimeout, SupplyFault
+from tentacle_coils.errors import ConfigError, FrameError, NakError, SupplyFault
+from tentacle_common.attempts import Attempts
 
 
 class Supply:
@@ -37,57 +38,20 @@ class Supply:
         self.line = line
         self.address = int(address)
         self.sign = -1.0 if polarity_inverted else 1.0
-        self.retries = int(retries)
         self.reply_timeout_s = float(reply_timeout_s)
-        self.max_turnaround_s = float(max_turnaround_s)
         self.voltage_limit_v = float(voltage_limit_v)
-        self.counters = {'commands': 0, 'retries': 0, 'naks': 0, 'timeouts': 0, 'garbled': 0,
-                         'stale_bytes': 0, 'unconfirmed_sets': 0}
+        self.attempts = Attempts(line, retries=retries, max_turnaround_s=max_turnaround_s,
+                                 fault=SupplyFault)
         self.identity = ''
-        self._out_of_step = False  # an unanswered request may still be answered
+
+    @property
+    def counters(self):
+        """Return what the exchanges met: commands, retries, NAKs, timeouts, ..."""
+        return self.attempts.counters
 
     def _attempts(self, what, attempt, verify=None):
-        """
-        Run attempt() up to 1 + retries times; count and classify failures.
-
-        A timeout or a garbled reply leaves the exchange ambiguous: the device may answer
-        late, and may have acted. Before the next request the line is drained until it has
-        been quiet for ``max_turnaround_s`` (a late reply must not answer a later request),
-        and a set that succeeds after an ambiguous attempt is confirmed by ``verify()`` (a
-        read-back returning '' or what is wrong): its ACK could still be a stale one.
-        A NAK is a clean answer: the set was refused, and is seen as refused.
-        """
-        last = None
-        ambiguous = False
-        for n in range(1 + self.retries):
-            if n:
-                self.counters['retries'] += 1
-            self.counters['commands'] += 1
-            try:
-                if self._out_of_step:
-                    self.counters['stale_bytes'] += self.line.discard_input(
-                        quiet_s=self.max_turnaround_s)
-                    self._out_of_step = False
-                result = attempt()
-                problem = verify() if ambiguous and verify is not None else ''
-                if not problem:
-                    return result
-                self.counters['unconfirmed_sets'] += 1
-                self._out_of_step = True
-                last = f'read-back after an ambiguous reply: {problem}'
-            except NakError as exc:
-                self.counters['naks'] += 1
-                last = exc
-            except ReplyTimeout as exc:
-                self.counters['timeouts'] += 1
-                last = exc
-                self._out_of_step = ambiguous = True
-            except FrameError as exc:
-                self.counters['garbled'] += 1
-                last = exc
-                self._out_of_step = ambiguous = True
-        raise SupplyFault(f'{self.line.path}: {what} failed after {1 + self.retries} attempts: '
-                          f'{last}')
+        """Run one exchange under the retry policy (tentacle_common.attempts)."""
+        return self.attempts.run(what, attempt, verify)
 
     def connect(self):
         """
@@ -184,8 +148,7 @@ class DxkdpSupply(Supply):
 
     def connect(self):
         """Read the state (presence) and program the voltage limit; see Supply.connect."""
-        self.line.discard_input()
-        self._out_of_step = False
+        self.attempts.resync()
         state = self._read_state()
         # First-generation units do not report their polarity: until a set at zero fixes
         # it, only the magnitude changes, so a current found here ramps down as it flows.
@@ -259,8 +222,7 @@ class ScpiSupply(Supply):
 
     def connect(self):
         """Identify the device and drain its error queue; see Supply.connect."""
-        self.line.discard_input()
-        self._out_of_step = False
+        self.attempts.resync()
         maker, model, serial_no, firmware = self._query(scpi.identify(), scpi.parse_identity)
         self.errors()
         self.identity = f'{maker} {model} s/n {serial_no} fw {firmware}'

@@ -4,7 +4,7 @@ import time
 
 import pytest
 from tentacle_coils.bank_process import BankClient, RESTARTS_MAX
-from tentacle_coils.errors import CoilsError, CommandRejected
+from tentacle_coils.errors import CommandRejected, DriverError
 
 
 @pytest.fixture
@@ -67,7 +67,7 @@ def test_a_vanished_node_leaves_the_coils_at_zero_and_off(client, wait_for):
 
 
 def test_bad_configuration_is_reported():
-    with pytest.raises(CoilsError, match='ports needs 3 entries'):
+    with pytest.raises(DriverError, match='ports needs 3 entries'):
         BankClient(ports=['/dev/null'], dialect='dxkdp', baud=9600, max_current_a=1.0,
                    slew_rate_a_per_s=1.0, watchdog_s=1.0)
 

@@ -61,7 +61,7 @@ def test_a_late_ack_is_drained_and_the_refusal_of_the_retries_is_seen():
     with pytest.raises(SupplyFault, match='CURRENT failed after 4 attempts.*NAK'):
         supply.set_current(6.0)
     line.finish()
-    assert supply.counters['stale_bytes'] == 1 and supply.counters['naks'] == 3
+    assert supply.counters['stale_bytes'] == 1 and supply.counters['refusals'] == 3
     late_ack_at = line.sent[0][0] + 0.3
     assert line.sent[1][0] > late_ack_at + 0.25  # the retry waited for a quiet line
 
@@ -71,7 +71,7 @@ def test_a_set_that_succeeds_after_a_timeout_is_confirmed_by_reading_the_state_b
                                  Exchange(READ_STATE, state_frame(6.0))])
     supply.set_current(6.0)
     line.finish()
-    assert supply.counters['timeouts'] == 1 and supply.counters['unconfirmed_sets'] == 0
+    assert supply.counters['timeouts'] == 1 and supply.counters['unconfirmed'] == 0
 
 
 def test_an_ack_later_than_the_worst_turnaround_is_caught_by_the_read_back():
@@ -88,7 +88,7 @@ def test_an_ack_later_than_the_worst_turnaround_is_caught_by_the_read_back():
     with pytest.raises(SupplyFault, match='NAK'):
         supply.set_current(6.0)
     line.finish()
-    assert supply.counters['unconfirmed_sets'] == 1
+    assert supply.counters['unconfirmed'] == 1
 
 
 def test_a_late_read_reply_is_not_taken_for_the_next_read():

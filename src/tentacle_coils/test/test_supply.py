@@ -6,7 +6,7 @@ import pytest
 
 from tentacle_coils.errors import ConfigError, LinkLost, SupplyFault
 from tentacle_coils.supply import make_supply
-from tentacle_coils.transport import SerialLine
+from tentacle_common.serial_line import SerialLine
 
 
 def connected(emu, dialect, baud, **kwargs):

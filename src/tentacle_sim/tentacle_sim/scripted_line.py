@@ -1,7 +1,7 @@
 """
 A serial line whose far end is a script, on a virtual clock: protocol tests for drivers.
 
-It has the methods of tentacle_coils.transport.SerialLine, and its own clock: ``now()``
+It has the methods of tentacle_common.serial_line.SerialLine, and its own clock: ``now()``
 starts at 0 and moves only as the line would (writes paced at the baud rate, reads waiting
 for bytes or their deadline, drains waiting for quiet). A test lists the exact exchange,
 ``Exchange(expect=request bytes, reply=reply bytes, after_s=device turnaround)``, or gives
@@ -12,8 +12,8 @@ test. Timing therefore decides nothing about the machine running the test.
 
 from dataclasses import dataclass
 
-from tentacle_coils.errors import LinkLost, ReplyTimeout
-from tentacle_coils.transport import BITS_PER_BYTE
+from tentacle_common.errors import LinkLost, ReplyTimeout
+from tentacle_common.serial_line import BITS_PER_BYTE
 
 
 class ScriptError(AssertionError):

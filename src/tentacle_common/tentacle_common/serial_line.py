@@ -10,7 +10,7 @@ import time
 
 import serial
 
-from tentacle_coils.errors import FrameError, LinkLost, ReplyTimeout
+from tentacle_common.errors import FrameError, LinkLost, ReplyTimeout
 
 BITS_PER_BYTE = 10  # 8N1: start, 8 data, stop
 WRITE_TIMEOUT_S = 1.0  # a write that cannot go out this long means the line is gone

@@ -1,0 +1,1 @@
+"""What every driver shares: parameter tables, spin, logging, diagnostics, serial line, retries."""

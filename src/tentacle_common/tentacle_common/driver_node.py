@@ -1,0 +1,150 @@
+"""
+ROS glue every driver node shares: parameters, log forwarding, diagnostics, start and spin.
+
+The only module of tentacle_common that imports rclpy. A driver node declares its table
+with ``declare_parameters``, forwards its pure code's logging with ``RosLogHandler``, builds
+one DiagnosticStatus per device with ``diagnostic_status``, starts rclpy with
+``init_checked`` (its parameters checked against the table first) and spins with
+``spin_until_signal``, after which it runs its safe stop undisturbed by further signals.
+"""
+
+import logging
+import os
+import signal
+import tempfile
+import threading
+
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
+from tentacle_common.errors import ConfigError
+from tentacle_common.params import check_ros_args
+import yaml
+
+LEVELS = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN,
+          'error': DiagnosticStatus.ERROR}
+
+
+def declare_parameters(node, table):
+    """Declare every row of a parameter table with a descriptor; return {name: value}."""
+    values = {}
+    for p in table:
+        descriptor = ParameterDescriptor(description=p.description, read_only=True)
+        if p.low is not None and isinstance(p.default, float):
+            descriptor.floating_point_range = [FloatingPointRange(
+                from_value=float(p.low), to_value=float(p.high), step=0.0)]
+        elif p.low is not None and isinstance(p.default, int):
+            descriptor.integer_range = [IntegerRange(
+                from_value=int(p.low), to_value=int(p.high), step=1)]
+        values[p.name] = node.declare_parameter(p.name, p.default, descriptor).value
+    return values
+
+
+class RosLogHandler(logging.Handler):
+    """Forward the pure code's Python logging to the node's ROS logger."""
+
+    def __init__(self, ros_logger):
+        """Wrap a ROS logger."""
+        super().__init__()
+        self.ros_logger = ros_logger
+
+    def emit(self, record):
+        """Log one record at the matching ROS severity."""
+        if record.levelno >= logging.ERROR:
+            self.ros_logger.error(self.format(record))
+        elif record.levelno >= logging.WARNING:
+            self.ros_logger.warning(self.format(record))
+        else:
+            self.ros_logger.info(self.format(record))
+
+
+def diagnostic_status(name, hardware_id, level, message, values=None):
+    """Return a DiagnosticStatus; level is 'ok', 'warn' or 'error', values a dict."""
+    status = DiagnosticStatus(name=name, hardware_id=hardware_id, level=LEVELS[level],
+                              message=message)
+    status.values = [KeyValue(key=str(k), value=str(v)) for k, v in (values or {}).items()]
+    return status
+
+
+def wants_help(argv):
+    """Return True when --help comes before any --ros-args."""
+    head = argv[:argv.index('--ros-args')] if '--ros-args' in argv else argv
+    return '--help' in head
+
+
+def init_checked(argv, node_name, table):
+    """
+    Check --ros-args against the parameter table, then start rclpy without its handlers.
+
+    Params files that needed conversions (integers for doubles) are handed to rcl as a
+    normalised copy, removed once rcl has read it.
+
+    :return: the warnings to log once the node exists (misspelt parameters)
+    :raises ConfigError: a params file that is missing, unreadable or has a wrong type, or
+        ROS arguments that rcl refuses
+    """
+    checked, warnings, rewrite = check_ros_args(argv, node_name, table)
+    temporary = []
+    try:
+        for index, document in rewrite.items():
+            handle = tempfile.NamedTemporaryFile('w', prefix=f'{node_name}_params_',
+                                                 suffix='.yaml', delete=False)
+            with handle:
+                yaml.safe_dump(document, handle)
+            temporary.append(handle.name)
+            checked[index] = handle.name
+        try:
+            rclpy.init(args=[node_name, *checked],
+                       signal_handler_options=SignalHandlerOptions.NO)
+        except Exception as exc:  # rcl refused the arguments: its own message says why
+            raise ConfigError(f'the ROS arguments were refused: {exc}') from None
+    finally:
+        for path in temporary:
+            os.unlink(path)
+    return warnings
+
+
+def ignore_further_signals(name):
+    """From now on SIGINT and SIGTERM only print that the safe stop goes on."""
+    def already_stopping(_signum, _frame):
+        # os.write: a print could re-enter the stderr buffer the main thread is writing to.
+        os.write(2, f'{name}: already stopping safely: signal ignored\n'.encode())
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, already_stopping)
+
+
+def spin_until_signal(node, poll_s=0.1):
+    """
+    Spin until SIGINT or SIGTERM (or the context ends); return the signal number or 0.
+
+    rclpy's own handlers shut the context down and then raise KeyboardInterrupt at whatever
+    bytecode is running; if that is a destructor the exception is swallowed and the next
+    wait fails on the dead context. Here a signal only sets a flag, so the executor stops
+    between callbacks and the context stays valid for the safe stop that follows. From the
+    first signal on, further ones only print a note (there is no moment in between when a
+    second signal could end the process mid-stop).
+    """
+    stop = threading.Event()
+    received = []
+
+    def on_signal(signum, _frame):
+        ignore_further_signals(node.get_name())
+        received.append(signum)
+        stop.set()
+
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    try:
+        while not stop.is_set() and node.context.ok():
+            executor.spin_once(timeout_sec=poll_s)
+    finally:
+        executor.remove_node(node)
+        executor.shutdown()
+        if not received:  # after a signal the safe stop follows: keep ignoring them
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+    return received[0] if received else 0

@@ -1,0 +1,184 @@
+"""
+Parameter tables: one row per parameter (name, default, range, unit in the description).
+
+Plain data (no rclpy): a node declares every row with a descriptor (driver_node.py),
+``--help`` prints the table (``describe``), and what a lab writes in a params file or with
+``-p`` is checked against it before rcl reads it (``check_ros_args``): integers given for
+doubles are converted (rcl refuses 40 for a double, and a sequence mixing 0 and 0.53e-3), a
+misspelt name is warned about with a suggestion, and a value of the wrong type is an error
+naming the file and the parameter.
+"""
+
+from dataclasses import dataclass
+import difflib
+import json
+import pathlib
+
+from tentacle_common.errors import ConfigError
+import yaml
+
+
+@dataclass(frozen=True)
+class Param:
+    """One parameter: its default fixes its type; low/high bound numbers (inclusive)."""
+
+    name: str
+    default: object
+    description: str
+    low: float | None = None
+    high: float | None = None
+
+
+def describe(params):
+    """Return the table as text for ``--help``."""
+    lines = []
+    for p in params:
+        bounds = f' [{p.low:g}, {p.high:g}]' if p.low is not None else ''
+        lines.append(f'  {p.name} (default {p.default!r}){bounds}\n      {p.description}')
+    return '\n'.join(lines)
+
+
+MAX_EXACT_INT = 2 ** 53  # integers up to this convert to doubles exactly
+
+
+def _coerce(p, value):
+    """
+    Return value as the type of p's default, converting only where that is exact.
+
+    Integers are accepted for doubles, also inside arrays (rcl refuses a sequence that
+    mixes 0 and 0.53e-3), and numbers PyYAML reads as text (``5e-3`` has no dot) as well.
+
+    :raises ValueError: a value of another type, or a double that is not finite
+    """
+    def as_double(v):
+        if isinstance(v, bool):
+            raise ValueError(f'{v!r} is not a number')
+        if isinstance(v, int):
+            if abs(v) > MAX_EXACT_INT:
+                raise ValueError(f'{v} is too large to be a double exactly')
+            return float(v)
+        if isinstance(v, str):
+            try:
+                v = float(v)
+            except ValueError:
+                raise ValueError(f'{v!r} is not a number') from None
+        if not isinstance(v, float):
+            raise ValueError(f'{v!r} is not a number')
+        if v != v or v in (float('inf'), float('-inf')):
+            raise ValueError(f'{v} is not finite')
+        return v
+
+    def exact(kind, v):
+        if kind is float:
+            return as_double(v)
+        if type(v) is not kind:  # bool is an int in Python, not in ROS
+            raise ValueError(f'{v!r} is not {"an integer" if kind is int else kind.__name__}')
+        return v
+
+    if isinstance(p.default, list):
+        if not isinstance(value, list):
+            raise ValueError(f'{value!r} is not a list')
+        return [exact(type(p.default[0]), v) for v in value]
+    return exact(type(p.default), value)
+
+
+def _suggestion(name, table):
+    close = difflib.get_close_matches(name, [p.name for p in table], n=1)
+    return f' (did you mean {close[0]}?)' if close else ''
+
+
+def _own_section(section, node_name):
+    """Return 'node' for this node's own section, 'all' for a wildcard, '' otherwise."""
+    name = str(section).lstrip('/')
+    if name == node_name or name.endswith('/' + node_name):
+        return 'node'
+    return 'all' if name in ('**', '*') else ''
+
+
+def check_params_file(path, node_name, table):
+    """
+    Read a ROS params file and check this node's parameters in it against the table.
+
+    :return: (the document, with integers in double parameters made doubles; warnings, one
+        per unknown parameter in this node's section; whether anything was converted)
+    :raises ConfigError: the file is missing, unreadable or not a params file, or a
+        parameter has a value of the wrong type; the message names the file and parameter
+    """
+    try:
+        text = pathlib.Path(path).read_text(encoding='utf-8')
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f'params file {path}: cannot be read: '
+                          f'{getattr(exc, "strerror", None) or exc}') from None
+    try:
+        document = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f'params file {path}: not YAML: {exc}') from None
+    if not isinstance(document, dict):
+        raise ConfigError(f'params file {path}: not a mapping of node names to '
+                          'ros__parameters')
+    by_name = {p.name: p for p in table}
+    warnings, changed = [], False
+    for section, body in document.items():
+        kind = _own_section(section, node_name)
+        if not kind:
+            continue
+        params = body.get('ros__parameters') if isinstance(body, dict) else None
+        if not isinstance(params, dict):
+            raise ConfigError(f'params file {path}: {section}: no ros__parameters mapping')
+        for name, value in params.items():
+            p = by_name.get(name)
+            if p is None:
+                if kind == 'node':
+                    warnings.append(f'params file {path}: {name} is not a {node_name} '
+                                    f'parameter{_suggestion(name, table)}: ignored')
+                continue
+            try:
+                coerced = _coerce(p, value)
+            except ValueError as exc:
+                raise ConfigError(f'params file {path}: {name}: {exc}') from None
+            if coerced != value or type(coerced) is not type(value) or (
+                    isinstance(value, list) and any(
+                        type(a) is not type(b) for a, b in zip(coerced, value))):
+                params[name] = coerced
+                changed = True
+    return document, warnings, changed
+
+
+def check_ros_args(argv, node_name, table):
+    """
+    Check the parameters that ``--ros-args`` give: params files and ``-p NAME:=VALUE``.
+
+    :param argv: the command line after the program name
+    :return: (argv to hand to rclpy, warnings, {index in argv: normalised params document}
+        for each params file that needed conversions: write it out and put its path there)
+    :raises ConfigError: see check_params_file; also a -p value of the wrong type
+    """
+    argv = list(argv)
+    warnings, rewrite = [], {}
+    by_name = {p.name: p for p in table}
+    in_ros_args = False
+    for i, arg in enumerate(argv):
+        if arg == '--ros-args':
+            in_ros_args = True
+        elif arg == '--':
+            in_ros_args = False
+        elif in_ros_args and arg == '--params-file' and i + 1 < len(argv):
+            document, found, changed = check_params_file(argv[i + 1], node_name, table)
+            warnings += found
+            if changed:
+                rewrite[i + 1] = document
+        elif in_ros_args and arg in ('-p', '--param') and i + 1 < len(argv):
+            name, sep, text = argv[i + 1].partition(':=')
+            owner, _, name = name.rpartition(':')
+            if not sep or owner not in ('', node_name):
+                continue
+            if name not in by_name:
+                warnings.append(f'-p {name}: not a {node_name} parameter'
+                                f'{_suggestion(name, table)}: ignored')
+                continue
+            try:
+                value = _coerce(by_name[name], yaml.safe_load(text))
+            except (ValueError, yaml.YAMLError) as exc:
+                raise ConfigError(f'-p {name}: {exc}') from None
+            argv[i + 1] = f'{owner + ":" if owner else ""}{name}:=' + json.dumps(value)
+    return argv, warnings, rewrite

@@ -13,11 +13,25 @@ This staggered (midpoint) scheme converges at second order in the link length.
 """
 
 from dataclasses import dataclass
+import math
 
 import numpy as np
 from tentacle_planner.dipoles import pairs_between_groups
 
 MIN_LINK_FRACTION = 1e-6  # a partial link shorter than this fraction of its full length is dropped
+MAX_CHAIN_LINKS = 100_000
+"""
+The most links discretise() builds: the most any joint model solves (statics.MAX_LINKS).
+
+The planar model is O(n) per Newton step: at this size a cold solve takes 0.05 to 3 s here
+(2 cores; the slowest ran out of its 500 iterations) in an estimated 24 MiB, and building
+the chain 0.5 s. Checked before any link is built, so a huge sublinks count is refused at
+once.
+"""
+
+
+class ProblemTooLarge(ValueError):
+    """A chain or a solve beyond the stated size limits; the message says which and why."""
 
 
 @dataclass(frozen=True)
@@ -39,6 +53,14 @@ class Chain:
         """Return (i, j) index arrays of the link pairs in different segments (dipoles.py)."""
         groups = np.arange(self.size) if self.segment_index is None else self.segment_index
         return pairs_between_groups(groups)
+
+    def interacting_pair_count(self):
+        """Return how many pairs interacting_pairs() would give, without building them."""
+        n = self.size
+        if self.segment_index is None:
+            return n * (n - 1) // 2
+        counts = np.bincount(self.segment_index).astype(np.int64)
+        return int((n * n - int(counts @ counts)) // 2)
 
     def contact_distances(self, pairs):
         """
@@ -65,24 +87,39 @@ def discretise(spec, inserted_m=None, sublinks=1, backbone_m=0.0):
     :param spec: a TentacleSpec
     :param inserted_m: length pushed past the base, m (default: all of it)
     :param sublinks: links per segment, >= 1
-    :param backbone_m: how far the backbone reaches past the base, m (0: retracted)
-    :raises ValueError: inserted length outside [0, L], sublinks < 1, backbone_m < 0
+    :param backbone_m: how far the backbone reaches past the base, m (0: retracted); more
+        than 0 only for a tentacle with a backbone
+    :raises ValueError: inserted length outside [0, L], sublinks < 1, backbone_m < 0, a
+        backbone position for a tentacle without one
+    :raises ProblemTooLarge: more than MAX_CHAIN_LINKS free links
     """
     total = spec.length_m
     inserted = total if inserted_m is None else float(inserted_m)
     if not np.isfinite(inserted) or inserted < 0 or inserted > total * (1 + 1e-12):
         raise ValueError(f'inserted length {inserted_m} m is outside [0, {total:g}] m')
-    if int(sublinks) != sublinks or sublinks < 1:
+    try:
+        whole = int(sublinks) == sublinks
+    except (TypeError, ValueError, OverflowError):  # inf, nan, not a number
+        whole = False
+    if not whole or sublinks < 1:
         raise ValueError(f'sublinks {sublinks} must be a whole number >= 1')
+    sublinks = int(sublinks)
     if not np.isfinite(backbone_m) or backbone_m < 0:
         raise ValueError(f'backbone position {backbone_m} m must be >= 0')
+    if backbone_m > 0 and spec.backbone is None:
+        raise ValueError(f'backbone position {backbone_m:g} m given, but tentacle '
+                         f'{spec.name!r} has no backbone (its file has no backbone: block)')
     inserted = min(inserted, total)
     s_base = total - inserted
+    _check_link_count(spec, sublinks, s_base)
     rows = []  # (start, length, segment, segment index)
     start = 0.0
     for index, segment in enumerate(spec.segments):
         h = segment.length_m / sublinks
-        for k in range(int(sublinks)):
+        # Links wholly behind the base are skipped by the test below; start just before the
+        # first free one, so that the loop is as long as the chain it builds.
+        first = min(sublinks, max(0, math.floor((s_base - start) / h) - 1))
+        for k in range(first, sublinks):
             a, b = start + k * h, start + (k + 1) * h
             if b <= s_base:
                 continue
@@ -108,3 +145,16 @@ def discretise(spec, inserted_m=None, sublinks=1, backbone_m=0.0):
     return Chain(lengths, stiffness, moments, masses, s_start, spec.base_position_m,
                  spec.base_rotation, np.array([r[3] for r in rows], dtype=int),
                  np.array([np.sqrt(r[2].area_m2 / np.pi) for r in rows]))
+
+
+def _check_link_count(spec, sublinks, s_base):
+    """Raise ProblemTooLarge if the free part would have more than MAX_CHAIN_LINKS links."""
+    links, start = 0, 0.0
+    for segment in spec.segments:
+        free = min(max((start + segment.length_m - s_base) / segment.length_m, 0.0), 1.0)
+        links += math.ceil(free * sublinks)  # at most one more than discretise keeps
+        start += segment.length_m
+    if links > MAX_CHAIN_LINKS:
+        raise ProblemTooLarge(
+            f'{sublinks} sublinks x {len(spec.segments)} segment(s) make {links} links, more '
+            f'than the {MAX_CHAIN_LINKS} any joint model solves: use fewer sublinks')

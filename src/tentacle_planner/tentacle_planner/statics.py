@@ -14,6 +14,10 @@ Two joint models share the minimiser: planar 1-DoF joints (planar.py, O(n) per s
 a tridiagonal Hessian) and 3-DoF bend-bend-twist joints (spatial.py, dense Hessian); each
 has a linearised (small-angle) form, and either can add the magnets' interaction
 (dipoles.py), which couples every link with every other (a dense Hessian).
+
+A problem too large to answer within the time limit is refused before any work
+(check_size: MAX_LINKS per joint model, MAX_ESTIMATED_BYTES of dense arrays), and the time
+limit is checked before every Newton step and line-search trial.
 """
 
 import contextlib
@@ -24,7 +28,7 @@ import numpy as np
 from scipy.linalg import eigh, eigh_tridiagonal, LinAlgError, solveh_banded
 from scipy.linalg.lapack import dpotrf as potrf, dpotrs as potrs, dptsv as ptsv
 from tentacle_planner import planar, spatial
-from tentacle_planner.chain import Chain
+from tentacle_planner.chain import Chain, MAX_CHAIN_LINKS, ProblemTooLarge
 from tentacle_planner.dipoles import Contact
 from threadpoolctl import ThreadpoolController
 
@@ -37,6 +41,33 @@ ESCAPE_STEP_RAD = 0.05
 # themselves, and below the lower one OpenBLAS uses one thread anyway (and switching costs
 # 35 us, a tenth of a small solve).
 SINGLE_THREAD_SIZES = (32, 600)
+MAX_LINKS = {1: MAX_CHAIN_LINKS, 3: 250}
+"""
+The most links a solve accepts, per joint model (dof): larger problems are refused at once.
+
+Planar: O(n) per Newton step (chain.MAX_CHAIN_LINKS). 3-DoF: a dense (3n, 3n) Hessian,
+factorised in every Newton step, and its smallest eigenpair (LAPACK's dsyevr, which first
+reduces the whole matrix to tridiagonal form) at the end and wherever the Hessian is
+indefinite. Measured here (2 cores): at 250 links a Cholesky takes 11 to 15 ms, the
+eigenpair 30 to 45 ms and a cold solve 0.1 to 1.6 s; at 3000 links 3 s, 35 to 44 s and 1
+to 2 minutes.
+"""
+MAX_ESTIMATED_BYTES = 40 * 2 ** 20
+"""
+The most memory (estimate_memory_bytes) a solve may need; larger problems are refused.
+
+Set by time, not by RAM: it bounds the dense problems, whose work grows as the 1.5th power
+of their memory. With magnet-to-magnet interaction it is the binding limit: 215 to 245
+planar or 145 to 170 3-DoF links (fewer with more segments, hence more pairs); cold solves
+there take 0.1 to 2 s here, 4.7 s at worst (24 magnets folding onto each other until they
+touch, 27 Newton steps). bench/model_tradeoff.py's largest, the braided tentacle at 160
+3-DoF links with dipoles, needs 38.7 MiB. The 3-DoF model without dipoles reaches
+MAX_LINKS first (26 MiB).
+"""
+_BYTES_PER_LINK = 256  # the chain's arrays (11 doubles a link) and the solver's vectors
+_DENSE_COPIES = 6  # live copies of a dense Hessian: two evaluations, factor, eigh, shifted
+_DIPOLE_BYTES_PER_PAIR = 720  # dipoles.interaction's per-pair temporaries, (3, 3, p) and (3, p)
+_DIPOLE_COPIES = 5  # its (6n, 6n) Hessian, and four (6n, N) Jacobian-sized arrays
 _BLAS = []  # the ThreadpoolController, made on first use (it inspects the loaded libraries)
 _COMPILED = []  # [True] once the compiled passes are ready (solve keeps them off its clock)
 
@@ -253,6 +284,54 @@ def compile_kernels():
     _COMPILED.append(True)
 
 
+def estimate_memory_bytes(links, dof=1, dipole_pairs=0):
+    """
+    Return the estimated peak memory of a solve's arrays, bytes.
+
+    Dense Hessians in the joint angles are (N, N) doubles with N = 3 n (3-DoF) or n (planar
+    with dipoles: otherwise it is tridiagonal); the magnets' interaction adds its (6n, 6n)
+    Hessian in moments and centres, the Jacobian that maps it to the angles and per-pair
+    temporaries (up to n (n - 1) / 2 pairs). Measured peaks are 0.7 to 1.0 of this.
+
+    :param links: number of links n
+    :param dof: 1 (planar) or 3
+    :param dipole_pairs: interacting dipole pairs (Chain.interacting_pair_count(); 0 without
+        the interaction)
+    """
+    n = int(links)
+    size = 3 * n if dof == 3 else n
+    dense = dof == 3 or dipole_pairs > 0
+    estimate = _BYTES_PER_LINK * n + (8 * _DENSE_COPIES * size ** 2 if dense else 0)
+    if dipole_pairs > 0:
+        estimate += (8 * (6 * n) ** 2 + 8 * (_DIPOLE_COPIES - 1) * 6 * n * size
+                     + _DIPOLE_BYTES_PER_PAIR * int(dipole_pairs))
+    return estimate
+
+
+def check_size(links, dof=1, dipole_pairs=0):
+    """
+    Refuse a problem too large to answer within the time limit (MAX_LINKS, MAX_ESTIMATED_BYTES).
+
+    :param links: number of links n
+    :param dof: 1 (planar) or 3
+    :param dipole_pairs: interacting dipole pairs (0 without the interaction)
+    :raises ProblemTooLarge: saying which limit and by how much
+    """
+    if dof not in (1, 3):
+        raise ValueError(f'dof {dof} is not 1 or 3')
+    model = {1: 'planar', 3: '3-DoF'}[dof]
+    if links > MAX_LINKS[dof]:
+        raise ProblemTooLarge(f'{links} links: the {model} model solves at most '
+                              f'{MAX_LINKS[dof]} (use fewer sublinks)')
+    estimate = estimate_memory_bytes(links, dof, dipole_pairs)
+    if estimate > MAX_ESTIMATED_BYTES:
+        terms = f' with {dipole_pairs} interacting dipole pairs' if dipole_pairs else ''
+        raise ProblemTooLarge(
+            f'{links} links{terms} in the {model} model need an estimated '
+            f'{estimate / 2 ** 20:,.0f} MiB of dense arrays, more than the '
+            f'{MAX_ESTIMATED_BYTES / 2 ** 20:.0f} MiB limit (use fewer sublinks)')
+
+
 def _blas_threads(size):
     """Return a context that keeps BLAS on one thread for a dense problem of this size."""
     if not SINGLE_THREAD_SIZES[0] <= size <= SINGLE_THREAD_SIZES[1]:
@@ -274,9 +353,15 @@ def _shifted_solve(solve_with_shift, diagonal, g):
     return -g / scale
 
 
-def _minimise(problem, x, tol, max_iterations, time_limit_s):
-    """Return (x, reason, iterations, residual, stability or None) of a damped Newton."""
-    deadline = time.monotonic() + time_limit_s
+def _minimise(problem, x, tol, max_iterations, time_limit_s, deadline):
+    """
+    Return (x, reason, iterations, residual, stability or None) of a damped Newton.
+
+    The deadline (time.monotonic()) is checked before every Newton step and every trial of
+    its line search: the run overshoots it by at most one evaluation or factorisation, which
+    check_size keeps to a fraction of a second.
+    """
+    out_of_time = f'no convergence within the {time_limit_s:g} s limit'
     iterations = escapes = 0
     while True:
         g = problem.gradient(x)
@@ -297,8 +382,7 @@ def _minimise(problem, x, tol, max_iterations, time_limit_s):
             return x, f'no convergence in {max_iterations} iterations', iterations, \
                 residual, None
         if time.monotonic() > deadline:
-            return x, f'no convergence within the {time_limit_s:g} s limit', iterations, \
-                residual, None
+            return x, out_of_time, iterations, residual, None
         iterations += 1
         step = problem.newton_step(x, g)
         biggest = np.abs(step).max()
@@ -307,6 +391,8 @@ def _minimise(problem, x, tol, max_iterations, time_limit_s):
         u0, slope = problem.energy(x), float(g @ step)
         alpha, contact = 1.0, None
         while alpha > 1e-12:
+            if time.monotonic() > deadline:  # a line search evaluates a dense Hessian per trial
+                return x, out_of_time, iterations, residual, None
             trial = x + alpha * step
             try:
                 u = problem.energy(trial)
@@ -343,8 +429,13 @@ def solve(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=1, initial=None, tol
         is at an obtuse angle to the field, and the result says so
     :param dipoles: magnet-to-magnet interaction: every link is a point dipole at its centre
         acting on the links of other segments (a segment is one magnet)
+    :param time_limit_s: wall-clock limit, s, from the start of the solve (numba's one-off
+        compilation excepted): the result then says it did not converge; the run overshoots
+        it by at most one Newton step (a fraction of a second at the largest sizes)
     :raises ValueError: non-finite field or gravity, an initial state of the wrong shape,
         the planar linearised model with dipoles (use dof 3)
+    :raises ProblemTooLarge: more links than MAX_LINKS[dof], or an estimated memory beyond
+        MAX_ESTIMATED_BYTES (check_size)
     """
     n = chain.size
     if dof not in (1, 3):
@@ -359,8 +450,13 @@ def solve(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=1, initial=None, tol
         return Equilibrium(np.zeros((0,) if dof == 1 else (0, 3)),
                            chain.base_position_m[None, :].copy(), True, 'nothing inserted',
                            0, 0.0, np.inf, 0.0)  # no degree of freedom: vacuously stable
+    pair_count = chain.interacting_pair_count() if dipoles else 0
+    check_size(n, dof, pair_count)
     compile_kernels()  # seconds on a fresh machine, not to be charged to a solve's limit
-    pairs = chain.interacting_pairs() if dipoles else None
+    deadline = time.monotonic() + time_limit_s
+    # Without a pair (one segment) the interaction is nothing: not even the (empty) pair list,
+    # which takes n^2 memory to build.
+    pairs = chain.interacting_pairs() if pair_count else None
     if dof == 1:
         if linear and dipoles:
             raise ValueError('the planar linearised model has no dipole interaction: use dof 3')
@@ -375,13 +471,14 @@ def solve(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=1, initial=None, tol
     dense = dof == 3 or problem.pairs is not None
     with _blas_threads(problem.size if dense else np.inf):
         try:
-            return _solve(problem, x.reshape(-1), shape, tol, max_iterations, time_limit_s)
+            return _solve(problem, x.reshape(-1), shape, tol, max_iterations, time_limit_s,
+                          deadline)
         except Contact as exc:  # the start itself has two magnets in one place
             return Equilibrium(np.full(shape, np.nan), np.full((n + 1, 3), np.nan), False,
                                f'start state: {exc}', 0, np.nan, np.nan, np.nan)
 
 
-def _solve(problem, x, shape, tol, max_iterations, time_limit_s):
+def _solve(problem, x, shape, tol, max_iterations, time_limit_s, deadline):
     """Return the Equilibrium of a problem from x (see solve)."""
     points_shape = (problem.chain.size + 1, 3)
     if problem.linear:
@@ -393,7 +490,7 @@ def _solve(problem, x, shape, tol, max_iterations, time_limit_s):
                                'linearised model has no minimum (Hessian not positive '
                                'definite)', 0, np.nan, lowest, np.nan)
     x, reason, iterations, residual, stability = _minimise(problem, x, tol, max_iterations,
-                                                           time_limit_s)
+                                                           time_limit_s, deadline)
     if not np.all(np.isfinite(x)):
         return Equilibrium(np.full(shape, np.nan), np.full(points_shape, np.nan), False,
                            reason, iterations, residual, np.nan, np.nan)

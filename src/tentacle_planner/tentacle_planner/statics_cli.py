@@ -5,17 +5,25 @@ tentacle-statics: the equilibrium of a tentacle in a uniform field, for what-ifs
 
 Prints the centreline, the tip position and heading, the stability (smallest Hessian
 eigenvalue) and whether the solve converged. Exit code 0 when converged, 3 when not (the
-result is still printed), 2 for bad input.
+result is still printed), 2 for bad input, including a problem beyond the size limits
+(statics.MAX_LINKS, statics.MAX_ESTIMATED_BYTES, tentacle_spec.MAX_FILE_BYTES).
 """
 
 import argparse
 import json
+import re
 import sys
 
 import numpy as np
 from tentacle_planner.chain import discretise
 from tentacle_planner.statics import solve
 from tentacle_planner.tentacle_spec import load_tentacle, SpecError
+
+# Any float, as float() reads it. argparse takes an argument for an option unless it matches
+# its negative-number pattern, which (Python 3.11) has no exponent: '--field 0 -5e-3 0' would
+# be an error. No option here looks like a number, so nothing is lost.
+NEGATIVE_NUMBER = re.compile(r'^-(?:(?:\d+\.?\d*|\.\d+)(?:e[-+]?\d+)?|inf(?:inity)?|nan)$',
+                             re.IGNORECASE)
 
 
 def build_parser():
@@ -40,6 +48,7 @@ def build_parser():
     parser.add_argument('--linear', action='store_true',
                         help='small-angle (linearised) model: one linear solve')
     parser.add_argument('--json', action='store_true', help='print one JSON object')
+    parser._negative_number_matcher = NEGATIVE_NUMBER
     return parser
 
 

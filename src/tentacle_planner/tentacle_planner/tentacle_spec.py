@@ -33,6 +33,14 @@ import numpy as np
 import yaml
 
 MU0 = 4e-7 * math.pi  # vacuum permeability, T m / A
+MAX_FILE_BYTES = 64 * 1024
+"""
+The largest tentacle file load_tentacle reads, bytes; it reads at most one byte more.
+
+Eleven times the largest shipped file (vsr_chapter6.yaml, 24 segments, 5.6 kB): room for some
+280 segments written out as fully. PyYAML's pure-Python parser takes up to 1 s here on a file
+of this size (64 KiB of nested brackets or a list of numbers), 16 s on 1 MiB.
+"""
 
 
 class SpecError(ValueError):
@@ -94,7 +102,7 @@ class _Reader:
     def mapping(self, value, where, allowed, required=()):
         if not isinstance(value, dict):
             self.fail(where, f'expected a mapping, got {type(value).__name__}')
-        unknown = sorted(set(value) - set(allowed))
+        unknown = sorted(set(value) - set(allowed), key=repr)  # YAML keys need not be str
         if unknown:
             self.fail(where, f'unknown key(s) {unknown}; allowed: {sorted(allowed)}')
         missing = [k for k in required if k not in value]
@@ -207,22 +215,35 @@ def parse_tentacle(document, source='<tentacle>'):
             read.fail('backbone.count', f'{count:g} is not a whole number of rods')
         # Thesis eq. 6.4: n rods of radius r, I = n pi r^4 / 4 (bending about their centres).
         backbone = Backbone(e * count * math.pi * d ** 4 / 64)
-    return TentacleSpec(str(doc.get('name', pathlib.Path(str(source)).stem)), position,
-                        rotation, segments, backbone)
+    name = doc.get('name', pathlib.Path(str(source)).stem)
+    if not isinstance(name, str) or not name.strip():
+        read.fail('name', f'expected a non-empty string, got {name!r}')
+    return TentacleSpec(name, position, rotation, segments, backbone)
 
 
 def load_tentacle(path):
     """
     Read and validate a tentacle YAML file.
 
-    :raises SpecError: unreadable, not YAML, or a field that is missing, unknown or invalid
+    :raises SpecError: unreadable, larger than MAX_FILE_BYTES, not UTF-8 text, not YAML, or
+        a field that is missing, unknown or invalid
     """
     try:
-        text = pathlib.Path(path).read_text(encoding='utf-8')
+        with open(path, 'rb') as file:
+            data = file.read(MAX_FILE_BYTES + 1)  # a device or a huge file: no more than that
     except OSError as exc:
         raise SpecError(f'{path}: {exc.strerror}') from None
+    if len(data) > MAX_FILE_BYTES:
+        raise SpecError(f'{path}: larger than {MAX_FILE_BYTES // 1024} KiB, the limit for a '
+                        'tentacle file')
+    try:
+        text = data.decode('utf-8')
+    except UnicodeDecodeError as exc:
+        raise SpecError(f'{path}: not UTF-8 text ({exc.reason} at byte {exc.start})') from None
     try:
         document = yaml.safe_load(text)
     except yaml.YAMLError as exc:
         raise SpecError(f'{path}: not valid YAML: {exc}') from None
+    except RecursionError:  # PyYAML's composer recurses once per level of nesting
+        raise SpecError(f'{path}: not valid YAML: nested too deeply') from None
     return parse_tentacle(document, path)

@@ -28,7 +28,9 @@ def test_partial_insertion_keeps_the_distal_part(cantilever):
 @pytest.mark.parametrize('kwargs, message', [
     ({'inserted_m': 0.03}, 'outside'), ({'inserted_m': -0.001}, 'outside'),
     ({'inserted_m': float('nan')}, 'outside'), ({'sublinks': 0}, 'sublinks'),
-    ({'backbone_m': -1.0}, 'backbone')])
+    ({'backbone_m': -1.0}, 'backbone'), ({'sublinks': float('inf')}, 'sublinks'),
+    ({'backbone_m': 0.01}, "tentacle 'cantilever' has no backbone"),
+    ({'sublinks': 100_001}, 'more than the 100000 any joint model solves')])
 def test_bad_knobs_raise(cantilever, kwargs, message):
     with pytest.raises(ValueError, match=message):
         discretise(cantilever[0], **kwargs)
@@ -39,6 +41,7 @@ def test_links_know_their_segment_and_which_pairs_interact(braided):
     np.testing.assert_array_equal(chain.segment_index, np.repeat(np.arange(5), 3))
     i, j = chain.interacting_pairs()
     assert len(i) == 15 * 14 // 2 - 5 * 3  # all pairs but the three within each segment
+    assert chain.interacting_pair_count() == len(i)
     assert np.all(chain.segment_index[i] != chain.segment_index[j])
     radius = np.sqrt(braided.segments[0].area_m2 / np.pi)
     np.testing.assert_allclose(chain.radii_m, radius)

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from tentacle_planner.chain import discretise
 from tentacle_planner.statics import solve
-from tentacle_planner.tentacle_spec import load_tentacle, MU0, parse_tentacle, SpecError
+from tentacle_planner.tentacle_spec import (load_tentacle, MAX_FILE_BYTES, MU0, parse_tentacle,
+                                            SpecError)
 import yaml
 
 GOOD = {
@@ -59,10 +60,20 @@ def test_rectangular_section_and_anisotropic_moduli():
     (['segments', 0, 'section'], KeyError, r"missing key\(s\) \['section'\]"),
     (['segments'], [], 'non-empty list'),
     (['base'], {'direction': [1, 0, 0], 'normal': [2, 0, 0]}, 'parallel'),
+    (['name'], None, 'name: expected a non-empty string, got None'),
+    (['name'], '', "name: expected a non-empty string, got ''"),
+    (['name'], 42, 'name: expected a non-empty string, got 42'),
 ])
 def test_bad_fields_are_named(path, value, message):
     with pytest.raises(SpecError, match=f'my.yaml: .*{message}'):
         parse_tentacle(with_change(path, value), 'my.yaml')
+
+
+def test_unknown_keys_of_mixed_types_are_named():
+    doc = with_change(['segments', 0, 1], 'one')  # YAML keys need not be strings
+    doc['segments'][0]['colour'] = 'red'
+    with pytest.raises(SpecError, match=r"segments\[0\]: unknown key\(s\) \['colour', 1\]"):
+        parse_tentacle(doc, 'my.yaml')
 
 
 def test_file_errors_name_the_file(tmp_path):
@@ -80,3 +91,25 @@ def test_shipped_tentacles_load_and_solve(name):
     spec = load_tentacle(path)
     eq = solve(discretise(spec, sublinks=2), [0.0, 0.01, 0.0], dof=3)
     assert eq.converged, eq.reason
+
+
+def test_file_size_is_capped_without_reading_past_the_cap(tmp_path):
+    text = yaml.safe_dump(GOOD)
+    fits = tmp_path / 'fits.yaml'
+    fits.write_text(text + '#' * (MAX_FILE_BYTES - len(text)))
+    assert fits.stat().st_size == MAX_FILE_BYTES
+    assert load_tentacle(fits).name == 't'
+    over = tmp_path / 'over.yaml'
+    over.write_text(text + '#' * (MAX_FILE_BYTES + 1 - len(text)))
+    with pytest.raises(SpecError, match=f'over.yaml: larger than {MAX_FILE_BYTES // 1024} KiB'):
+        load_tentacle(over)  # /dev/zero, endless: test_cli_limits.py
+
+
+def test_binary_files_are_refused_naming_the_file(tmp_path):
+    path = tmp_path / 'random.yaml'
+    path.write_bytes(np.random.default_rng(3).bytes(1000))
+    with pytest.raises(SpecError, match='random.yaml: not UTF-8 text'):
+        load_tentacle(path)
+    path.write_text('name: caf\u00e9\n', encoding='latin-1')
+    with pytest.raises(SpecError, match=r'random.yaml: not UTF-8 text \(invalid'):
+        load_tentacle(path)

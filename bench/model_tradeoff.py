@@ -26,12 +26,12 @@ import sys
 import time
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
-sys.path[:0] = [str(ROOT / 'src' / 'tentacle_planner'), str(ROOT / 'bench')]
+sys.path[:0] = [str(ROOT / 'src' / 'tentacle_model'), str(ROOT / 'bench')]
 
 import numpy as np  # noqa: E402
-from tentacle_planner.chain import discretise  # noqa: E402
-from tentacle_planner.statics import solve  # noqa: E402
-from tentacle_planner.tentacle_spec import load_tentacle  # noqa: E402
+from tentacle_model.chain import discretise  # noqa: E402
+from tentacle_model.statics import solve  # noqa: E402
+from tentacle_model.tentacle_spec import load_tentacle  # noqa: E402
 
 TENTACLES = ROOT / 'config' / 'tentacles'
 SUBLINKS = (1, 2, 4, 8, 10, 16, 32, 64)  # 10: the braided tentacle at 50 links

@@ -14,14 +14,13 @@ setup(
     zip_safe=True,
     maintainer='Tentacle rig software team',
     maintainer_email='rig-software@example.com',
-    description='Tentacle statics model, optimiser, schedule files and schedule player.',
+    description='Path handling, optimiser, scenes and schedule files, schedule player node.',
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
             'tentacle-plan = tentacle_planner.plan_cli:main',
             'player_node = tentacle_planner.player_node:main',
-            'tentacle-statics = tentacle_planner.statics_cli:main',
         ],
     },
 )

@@ -1,1 +1,1 @@
-"""Tentacle statics model, optimiser, schedule files and schedule player."""
+"""Path handling, optimiser, scenes and schedule files, schedule player node."""

@@ -27,9 +27,9 @@ import time
 import numpy as np
 from scipy.linalg import eigh, eigh_tridiagonal, LinAlgError, solveh_banded
 from scipy.linalg.lapack import dpotrf as potrf, dpotrs as potrs, dptsv as ptsv
-from tentacle_planner import planar, spatial
-from tentacle_planner.chain import Chain, MAX_CHAIN_LINKS, ProblemTooLarge
-from tentacle_planner.dipoles import Contact
+from tentacle_model import planar, spatial
+from tentacle_model.chain import Chain, MAX_CHAIN_LINKS, ProblemTooLarge
+from tentacle_model.dipoles import Contact
 from threadpoolctl import ThreadpoolController
 
 MAX_STEP_RAD = 0.5       # largest change of any angle in one Newton step

@@ -2,9 +2,9 @@
 
 import numpy as np
 import pytest
-from tentacle_planner import planar
-from tentacle_planner.chain import discretise
-from tentacle_planner.statics import solve
+from tentacle_model import planar
+from tentacle_model.chain import discretise
+from tentacle_model.statics import solve
 
 
 def closed_form_tip_deflection(length, ei, ma, b_t):

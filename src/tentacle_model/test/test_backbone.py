@@ -4,9 +4,9 @@ import pathlib
 
 import numpy as np
 import pytest
-from tentacle_planner.chain import discretise
-from tentacle_planner.statics import solve, solve_planar
-from tentacle_planner.tentacle_spec import load_tentacle
+from tentacle_model.chain import discretise
+from tentacle_model.statics import solve, solve_planar
+from tentacle_model.tentacle_spec import load_tentacle
 
 VSR = pathlib.Path(__file__).resolve().parents[3] / 'config/tentacles/vsr_chapter6.yaml'
 

@@ -14,7 +14,7 @@ residual_3dof does the same for bend-bend-twist joints (thesis eq. 5.2).
 """
 
 import numpy as np
-from tentacle_planner import spatial
+from tentacle_model import spatial
 
 
 def residual(joint_angles_rad, stiffness_n_m, moment_a_m2, psi_rad, field_t):

@@ -10,9 +10,9 @@ import time
 from hypothesis import given, HealthCheck, settings, strategies as st
 import numpy as np
 import pytest
-from tentacle_planner.chain import discretise
-from tentacle_planner.statics import compile_kernels, solve
-from tentacle_planner.tentacle_spec import parse_tentacle
+from tentacle_model.chain import discretise
+from tentacle_model.statics import compile_kernels, solve
+from tentacle_model.tentacle_spec import parse_tentacle
 
 TIME_LIMIT_S = 2.0
 

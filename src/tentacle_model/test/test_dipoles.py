@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from tentacle_planner.dipoles import interaction, pairs_between_groups
+from tentacle_model.dipoles import interaction, pairs_between_groups
 
 MU0 = 4e-7 * math.pi  # written out here, so the references do not share the module's constant
 

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from tentacle_planner import dipoles
+from tentacle_model import dipoles
 
 
 def cross(a, b):

@@ -7,9 +7,9 @@ import time
 import numpy as np
 import pytest
 from scipy.integrate import solve_bvp
-from tentacle_planner import planar
-from tentacle_planner.chain import discretise
-from tentacle_planner.statics import compile_kernels, solve, solve_planar
+from tentacle_model import planar
+from tentacle_model.chain import discretise
+from tentacle_model.statics import compile_kernels, solve, solve_planar
 
 
 def field(magnitude_t, degrees):
@@ -128,7 +128,7 @@ def test_bad_inputs_raise(cantilever):
 
 
 def test_command_line_json(capsys):
-    from tentacle_planner.statics_cli import main
+    from tentacle_model.statics_cli import main
     path = pathlib.Path(__file__).resolve().parents[3] / 'config/tentacles/cantilever.yaml'
     code = main(['--tentacle', str(path), '--field', '0', '0.005',
                  '0', '--sublinks', '64', '--json'])
@@ -140,7 +140,7 @@ def test_command_line_json(capsys):
 
 
 def test_command_line_three_dof_out_of_plane(capsys):
-    from tentacle_planner.statics_cli import main
+    from tentacle_model.statics_cli import main
     path = pathlib.Path(__file__).resolve().parents[3] / 'config/tentacles/cantilever.yaml'
     assert main(['--tentacle', str(path), '--field', '0', '0', '0.005', '--dof', '3',
                  '--json']) == 0
@@ -149,7 +149,7 @@ def test_command_line_three_dof_out_of_plane(capsys):
 
 
 def test_command_line_knobs(capsys):
-    from tentacle_planner.statics_cli import main
+    from tentacle_model.statics_cli import main
     tentacles = pathlib.Path(__file__).resolve().parents[3] / 'config/tentacles'
 
     def run(name, *args):
@@ -192,7 +192,7 @@ def test_two_magnets_settle_where_a_brute_force_search_of_the_energy_does(dof):
     # minimises the energy written out here from the textbook dipole formula with a
     # derivative-free search.
     from scipy.optimize import minimize
-    from tentacle_planner.tentacle_spec import parse_tentacle
+    from tentacle_model.tentacle_spec import parse_tentacle
     seg = {'length_m': 0.005, 'section': {'diameter_m': 0.001}, 'youngs_modulus_pa': 2e5,
            'density_kg_m3': 1400.0, 'magnetisation': {'remanence_t': 0.3,
                                                       'direction': [1, 0, 0]}}
@@ -228,7 +228,7 @@ def test_two_magnets_settle_where_a_brute_force_search_of_the_energy_does(dof):
 def test_magnets_that_fold_together_are_reported_not_collapsed(dof):
     # Strong magnets on a soft rod: point dipoles attract without bound as they meet, and
     # contact is not modelled, so the solve stops at contact and says which links touch.
-    from tentacle_planner.tentacle_spec import parse_tentacle
+    from tentacle_model.tentacle_spec import parse_tentacle
     seg = {'length_m': 0.005, 'section': {'diameter_m': 0.001}, 'youngs_modulus_pa': 2e5,
            'density_kg_m3': 1400.0, 'magnetisation': {'remanence_t': 0.5,
                                                       'direction': [1, 0, 0]}}

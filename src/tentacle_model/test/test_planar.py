@@ -2,8 +2,8 @@
 
 import numpy as np
 import pytest
-from tentacle_planner import dipoles, planar
-from tentacle_planner.chain import Chain
+from tentacle_model import dipoles, planar
+from tentacle_model.chain import Chain
 
 
 def random_chain(n=7, seed=0):

@@ -10,10 +10,10 @@ the same rod stays untwisted and bends. The stability report flags the unstable 
 """
 
 import numpy as np
-from tentacle_planner import spatial
-from tentacle_planner.chain import discretise
-from tentacle_planner.statics import solve
-from tentacle_planner.tentacle_spec import parse_tentacle
+from tentacle_model import spatial
+from tentacle_model.chain import discretise
+from tentacle_model.statics import solve
+from tentacle_model.tentacle_spec import parse_tentacle
 
 MAGNET_BR_T = 1.45 * (1.6 / 3.0) ** 2  # an N52 magnet of 3.2 mm diameter in a 6 mm rod
 UNREINFORCED = {'bend_1': 1e5, 'bend_2': 1e5, 'twist': 1e5 / 3}

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import math
 
 import numpy as np
-from tentacle_planner.dipoles import pairs_between_groups
+from tentacle_model.dipoles import pairs_between_groups
 
 MIN_LINK_FRACTION = 1e-6  # a partial link shorter than this fraction of its full length is dropped
 MAX_CHAIN_LINKS = 100_000

@@ -4,10 +4,10 @@ import dataclasses
 
 import numpy as np
 import pytest
-from tentacle_planner import planar
-from tentacle_planner.chain import discretise
-from tentacle_planner.statics import solve, solve_planar
-from tentacle_planner.torque_balance import residual, residual_3dof
+from tentacle_model import planar
+from tentacle_model.chain import discretise
+from tentacle_model.statics import solve, solve_planar
+from tentacle_model.torque_balance import residual, residual_3dof
 
 
 def test_residual_vanishes_at_a_forward_equilibrium(cantilever):

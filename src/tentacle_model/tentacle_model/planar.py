@@ -19,7 +19,7 @@ W_i = (mass distal of link i) + (half of link i's mass).
 
 import numba
 import numpy as np
-from tentacle_planner import dipoles
+from tentacle_model import dipoles
 
 
 def loads(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0)):

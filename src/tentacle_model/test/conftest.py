@@ -4,7 +4,7 @@ import pathlib
 
 import numpy as np
 import pytest
-from tentacle_planner.tentacle_spec import load_tentacle
+from tentacle_model.tentacle_spec import load_tentacle
 
 ROOT = pathlib.Path(__file__).resolve().parents[3]
 

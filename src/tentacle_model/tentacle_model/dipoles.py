@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import math
 
 import numpy as np
-from tentacle_planner.tentacle_spec import MU0
+from tentacle_model.tentacle_spec import MU0
 
 _K = MU0 / (4 * math.pi)  # T m / A
 

@@ -15,9 +15,9 @@ import re
 import sys
 
 import numpy as np
-from tentacle_planner.chain import discretise
-from tentacle_planner.statics import solve
-from tentacle_planner.tentacle_spec import load_tentacle, SpecError
+from tentacle_model.chain import discretise
+from tentacle_model.statics import solve
+from tentacle_model.tentacle_spec import load_tentacle, SpecError
 
 # Any float, as float() reads it. argparse takes an argument for an option unless it matches
 # its negative-number pattern, which (Python 3.11) has no exponent: '--field 0 -5e-3 0' would

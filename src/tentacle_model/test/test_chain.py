@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from tentacle_planner.chain import discretise
+from tentacle_model.chain import discretise
 
 
 def test_uniform_rod_joint_stiffness_and_moments(cantilever):

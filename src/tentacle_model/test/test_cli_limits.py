@@ -23,10 +23,10 @@ import time
 
 import numpy as np
 import pytest
-from tentacle_planner import statics_cli
-from tentacle_planner.chain import discretise, MAX_CHAIN_LINKS, ProblemTooLarge
-from tentacle_planner.statics import check_size, compile_kernels, MAX_LINKS, solve
-from tentacle_planner.tentacle_spec import load_tentacle, MAX_FILE_BYTES
+from tentacle_model import statics_cli
+from tentacle_model.chain import discretise, MAX_CHAIN_LINKS, ProblemTooLarge
+from tentacle_model.statics import check_size, compile_kernels, MAX_LINKS, solve
+from tentacle_model.tentacle_spec import load_tentacle, MAX_FILE_BYTES
 
 ROOT = pathlib.Path(__file__).resolve().parents[3]
 TENTACLES = ROOT / 'config' / 'tentacles'
@@ -39,8 +39,8 @@ TIME_LIMIT_S = inspect.signature(solve).parameters['time_limit_s'].default  # 10
 FIELD = ['--field', '0', '0.005', '0']
 TIMED_MAIN = """
 import sys, time
-from tentacle_planner.statics import compile_kernels
-from tentacle_planner.statics_cli import main
+from tentacle_model.statics import compile_kernels
+from tentacle_model.statics_cli import main
 compile_kernels()
 started = time.monotonic()
 code = main(sys.argv[1:])
@@ -58,7 +58,7 @@ def compiled():
 def run_cli(*args):
     """Return (exit code, stdout, stderr, seconds main() took) of tentacle-statics."""
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        [str(ROOT / 'src' / 'tentacle_planner'), os.environ.get('PYTHONPATH', '')]))
+        [str(ROOT / 'src' / 'tentacle_model'), os.environ.get('PYTHONPATH', '')]))
 
     def limit_memory():
         resource.setrlimit(resource.RLIMIT_AS, (CHILD_MEMORY_BYTES, CHILD_MEMORY_BYTES))

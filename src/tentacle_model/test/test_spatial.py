@@ -4,9 +4,9 @@ import dataclasses
 
 import numpy as np
 import pytest
-from tentacle_planner import spatial
-from tentacle_planner.chain import Chain, discretise
-from tentacle_planner.statics import solve
+from tentacle_model import spatial
+from tentacle_model.chain import Chain, discretise
+from tentacle_model.statics import solve
 
 
 def random_chain(n, seed):

@@ -5,10 +5,10 @@ import pathlib
 
 import numpy as np
 import pytest
-from tentacle_planner.chain import discretise
-from tentacle_planner.statics import solve
-from tentacle_planner.tentacle_spec import (load_tentacle, MAX_FILE_BYTES, MU0, parse_tentacle,
-                                            SpecError)
+from tentacle_model.chain import discretise
+from tentacle_model.statics import solve
+from tentacle_model.tentacle_spec import (load_tentacle, MAX_FILE_BYTES, MU0, parse_tentacle,
+                                          SpecError)
 import yaml
 
 GOOD = {

@@ -1,0 +1,1 @@
+"""The tentacle: files, chain, statics at selectable fidelity (pure, no rclpy)."""

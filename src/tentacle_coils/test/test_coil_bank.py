@@ -204,3 +204,30 @@ def test_estop_reports_zero_and_off_only_once_read_back(rig, wait_for):
     # Off is safer than on at any current: after the ramp time and a grace, all switch off.
     assert wait_for(lambda: not any(emu.state()['output_on'] for emu in emus), timeout_s=3.0)
     assert 'not yet confirmed' in bank.status()[1]  # x still holds current: still said
+
+
+def test_a_port_named_twice_is_logged_as_an_error_at_once(caplog):
+    with caplog.at_level('ERROR', logger='tentacle_coils'):
+        build_bank(['/dev/a', '/dev/b', '/dev/a'], dialect='dxkdp', baud=9600,
+                   max_current_a=1.0, slew_rate_a_per_s=1.0, watchdog_s=1.0)
+    assert [r.getMessage() for r in caplog.records] == [
+        'ports: supplies x and z both name /dev/a; each needs its own port']
+
+
+def test_a_supply_found_holding_current_is_ramped_down_not_jumped(emulate, wait_for):
+    emus = emulate('dxkdp', baud=115200)
+    emus[0].load.drive(setpoint_a=4.0, output_on=True)  # left so by an earlier session
+    bank = build_bank([e.port for e in emus], dialect='dxkdp', baud=115200,
+                      max_current_a=10.0, slew_rate_a_per_s=40.0, watchdog_s=5.0)
+    t0 = time.monotonic()
+    bank.start()
+    try:
+        assert wait_for(lambda: setpoints(emus) == [0.0] * 3
+                        and not any(emu.state()['output_on'] for emu in emus))
+        steps = [(t0, 4.0)] + set_entries(emus[0], since=t0)
+        times, values = np.array(steps).T
+        assert len(steps) > 5 and times[-1] - t0 >= 4.0 / 40.0 - 2e-3  # ramped, not jumped
+        off = [e['t'] for e in emus[0].log if e.get('output_on') is False]
+        assert off and off[0] > times[-1]  # zero first, then off
+    finally:
+        bank.shutdown(timeout_s=1.0)

@@ -184,8 +184,8 @@ class BankClient:
     The node's handle on a bank process; the same questions as a CoilBank answers.
 
     If the bank process dies, a spare one (started beforehand, so it is already imported)
-    reopens the ports at once: a fresh bank connects each supply at zero current and
-    switches its output off. It is not enabled: commands are refused until ``enable(True)``.
+    reopens the ports at once: a fresh bank ramps each supply from what it holds to zero and
+    switches its output off, both read back. It is not enabled: commands are refused until ``enable(True)``.
     The estop state is carried over. After RESTARTS_MAX deaths within RESTART_WINDOW_S no
     more are started and the status says so.
     """
@@ -291,7 +291,7 @@ class BankClient:
                 self._state = {**_STARTING, 'status': ['error', self.death_note]}
             log.error('coils: %s', self.death_note)
             return
-        self.death_note = (f'coil bank process died (exit {code}); a fresh one drove every '
+        self.death_note = (f'coil bank process died (exit {code}); a fresh one drives every '
                            'supply to zero and off: call /coils/enable to resume')
         log.error('coils: coil bank process died (exit %s): a fresh one reopens the ports and '
                   'drives every supply to zero, outputs off; commands are refused until '

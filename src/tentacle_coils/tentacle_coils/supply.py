@@ -49,10 +49,6 @@ class Supply:
         """Return what the exchanges met: commands, retries, NAKs, timeouts, ..."""
         return self.attempts.counters
 
-    def _attempts(self, what, attempt, verify=None):
-        """Run one exchange under the retry policy (tentacle_common.attempts)."""
-        return self.attempts.run(what, attempt, verify)
-
     def connect(self):
         """
         Check the device answers and program its limits; return its identity.
@@ -129,7 +125,7 @@ class DxkdpSupply(Supply):
                                  f'to a request for address {self.address} code {code:02x}')
             return reply
 
-        return self._attempts(code.name, attempt, verify)
+        return self.attempts.run(code.name, attempt, verify)
 
     def _read_state(self):
         return dxkdp.parse_reading(self._exchange(dxkdp.read_state(self.address)), self.signed)
@@ -218,7 +214,7 @@ class ScpiSupply(Supply):
             self.line.write(request)
             return parse(self.line.read_until(scpi.TERMINATOR, self.line.now() + wait_s))
 
-        return self._attempts(request.decode('ascii').strip(), attempt)
+        return self.attempts.run(request.decode('ascii').strip(), attempt)
 
     def connect(self):
         """Identify the device and drain its error queue; see Supply.connect."""

@@ -185,9 +185,9 @@ class BankClient:
 
     If the bank process dies, a spare one (started beforehand, so it is already imported)
     reopens the ports at once: a fresh bank ramps each supply from what it holds to zero and
-    switches its output off, both read back. It is not enabled: commands are refused until ``enable(True)``.
-    The estop state is carried over. After RESTARTS_MAX deaths within RESTART_WINDOW_S no
-    more are started and the status says so.
+    switches its output off, both read back. It is not enabled: commands are refused until
+    ``enable(True)``. The estop state is carried over. After RESTARTS_MAX deaths within
+    RESTART_WINDOW_S no more are started and the status says so.
     """
 
     def __init__(self, on_rejected=None, **bank_kwargs):

@@ -1,0 +1,211 @@
+"""
+A tentacle in a scene, built once, for repeated solves: the planner's and simulator's model.
+
+``TentacleModel`` holds what does not change between solves (the tentacle, the joint model,
+sub-links, gravity, magnet-to-magnet interaction, the solver's budgets) and caches a chain
+per inserted length. It has one state representation whatever the joint model: joint angles
+(n, 3), rad, per joint bend_1 (in the base plane), bend_2 and twist (spatial.py); a planar
+model's state has only bend_1, and ``link_angles`` is its absolute-angle view. A state is
+carried from one inserted length to the next (``carry``): the chain grows at the base as the
+body goes in, so joints are matched by material coordinate.
+
+Solves are deterministic: the iteration budget decides the result, and the wall-clock limit
+only guards against a hang, so the same inputs give the same state on any machine.
+
+``field_sensitivity`` differentiates the equilibrium implicitly: the gradient g(q*, B) = 0
+at every equilibrium, so H dq = -(dg/dB) dB with H the Hessian at q*, and
+dg/dB = -(a_e x V_J(e)) for each elementary joint e (the torque balance of
+torque_balance.py, whose closed forms this shares). ``moment_sensitivity`` does the same for
+the links' magnetic moments (link frame), the planner's magnetisation unknowns.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from tentacle_model import planar, spatial, statics, torque_balance
+from tentacle_model.chain import discretise
+
+DEFAULT_ITERATIONS = 200
+HANG_GUARD_S = 60.0  # wall-clock limit: a guard only, never what decides a result
+
+
+@dataclass(frozen=True)
+class Solution:
+    """An equilibrium at one inserted length, in the model's state representation."""
+
+    inserted_m: float
+    state: np.ndarray         # (n, 3) joint angles, rad
+    equilibrium: statics.Equilibrium
+
+    @property
+    def points_m(self):
+        """Return the joints and the tip (n + 1, 3), m, world frame."""
+        return self.equilibrium.points_m
+
+
+@dataclass(frozen=True)
+class Sensitivity:
+    """Derivatives of an equilibrium with respect to the field (world frame)."""
+
+    state_per_t: np.ndarray   # (n, 3, 3) d q / d B: [joint, angle, field component], rad/T
+    points_per_t: np.ndarray  # (n + 1, 3, 3) d p / d B: [point, xyz, field component], m/T
+    hessian: np.ndarray       # (N, N) at the equilibrium in the free joint angles, N m/rad^2
+
+
+class TentacleModel:
+    """One tentacle in one scene: chains cached per inserted length, solves from a state."""
+
+    def __init__(self, spec, *, dof=3, sublinks=1, gravity_m_s2=(0.0, 0.0, 0.0),
+                 dipoles=False, backbone_m=0.0, tol=1e-9, max_iterations=DEFAULT_ITERATIONS):
+        """
+        Fix the model.
+
+        :param spec: a TentacleSpec (tentacle_spec.py)
+        :param dof: 1 (planar joints) or 3 (bend, bend, twist)
+        :param sublinks: links per segment
+        :param gravity_m_s2: (3,) world frame
+        :param dipoles: magnet-to-magnet interaction between segments
+        :param backbone_m: how far the backbone reaches past the base, m
+        :param tol: convergence tolerance (statics.solve)
+        :param max_iterations: Newton iterations per solve: what decides a result
+        :raises ValueError: dof not 1 or 3, or a bad knob (chain.discretise)
+        """
+        if dof not in (1, 3):
+            raise ValueError(f'dof {dof} is not 1 or 3')
+        self.spec, self.dof, self.sublinks = spec, dof, sublinks
+        self.gravity_m_s2 = np.asarray(gravity_m_s2, dtype=float)
+        self.dipoles, self.backbone_m = dipoles, backbone_m
+        self.tol, self.max_iterations = tol, max_iterations
+        self._chains = {}
+        self.chain(spec.length_m)  # a bad knob is refused now, not at the first solve
+
+    def chain(self, inserted_m):
+        """Return the Chain at an inserted length (m), built once."""
+        key = round(float(inserted_m), 12)
+        if key not in self._chains:
+            self._chains[key] = discretise(self.spec, key, self.sublinks, self.backbone_m)
+        return self._chains[key]
+
+    def straight(self, inserted_m):
+        """Return the straight state (n, 3) at an inserted length."""
+        return np.zeros((self.chain(inserted_m).size, 3))
+
+    def solve(self, inserted_m, field_t, state=None):
+        """
+        Return the Solution at an inserted length in a field, from a state (default straight).
+
+        :param inserted_m: length pushed past the base, m
+        :param field_t: (3,) uniform field, tesla, world frame
+        :param state: (n, 3) joint angles to start from, for this inserted length (see carry)
+        :raises ValueError: a state of another shape, a non-finite field
+        """
+        chain = self.chain(inserted_m)
+        start = self.straight(inserted_m) if state is None else np.asarray(state, dtype=float)
+        if start.shape != (chain.size, 3):
+            raise ValueError(f'state of shape {start.shape} for {chain.size} links at '
+                             f'{inserted_m:g} m inserted: carry() it there first')
+        initial = np.cumsum(start[:, 0]) if self.dof == 1 else start
+        eq = statics.solve(chain, field_t, self.gravity_m_s2, dof=self.dof, initial=initial,
+                           tol=self.tol, max_iterations=self.max_iterations,
+                           time_limit_s=HANG_GUARD_S, dipoles=self.dipoles)
+        return Solution(float(inserted_m), self.state_of(eq), eq)
+
+    def state_of(self, eq):
+        """Return an Equilibrium's angles as joint angles (n, 3)."""
+        if self.dof == 3:
+            return np.array(eq.angles_rad, dtype=float).reshape(-1, 3)
+        state = np.zeros((len(eq.angles_rad), 3))
+        state[:, 0] = planar.joint_angles(np.asarray(eq.angles_rad, dtype=float))
+        return state
+
+    @staticmethod
+    def link_angles(state):
+        """Return a planar state's absolute link angles (n,), rad, in the base plane."""
+        return np.cumsum(np.asarray(state)[:, 0])
+
+    def carry(self, state, from_m, to_m):
+        """
+        Return a state for another inserted length: joints matched by material coordinate.
+
+        The clamp joint keeps its bend; a joint at the same material point keeps its angles;
+        joints where the new chain has none before (new material, or a link cut anew at the
+        base) start straight. A warm start, not an equilibrium: solve from it.
+
+        :param state: (n, 3) joint angles at from_m
+        """
+        old, new = self.chain(from_m), self.chain(to_m)
+        state = np.asarray(state, dtype=float)
+        if state.shape != (old.size, 3):
+            raise ValueError(f'state of shape {state.shape} is not of {old.size} links at '
+                             f'{from_m:g} m inserted')
+        out = np.zeros((new.size, 3))
+        if old.size == 0 or new.size == 0:
+            return out
+        tolerance = 1e-9 * self.spec.length_m
+        index = np.searchsorted(old.s_start_m, new.s_start_m)
+        index = np.clip(index, 0, old.size - 1)
+        same = np.abs(old.s_start_m[index] - new.s_start_m) <= tolerance
+        out[same] = state[index[same]]
+        out[0] = state[0]
+        return out
+
+    def _free(self, n):
+        """Return the indices of the model's free angles in the flattened (3n,) state."""
+        every = np.arange(3 * n)
+        return every if self.dof == 3 else every[0::3]
+
+    def _evaluate(self, solution, field_t):
+        chain = self.chain(solution.inserted_m)
+        pairs = chain.interacting_pairs() if self.dipoles and chain.interacting_pair_count() \
+            else None
+        contact = None if pairs is None else chain.contact_distances(pairs)
+        state = spatial.evaluate(chain, solution.state, np.asarray(field_t, dtype=float),
+                                 self.gravity_m_s2, True, None, pairs, contact)
+        free = self._free(chain.size)
+        return chain, state, free, state.hessian[np.ix_(free, free)]
+
+    def _points_jacobian(self, state, free):
+        """Return d p / d q (n + 1, 3, N) for the free angles: a_e x (p_k - p_j(e)), k > j."""
+        n = len(state.points_m) - 1
+        joint = free // 3
+        axes = state.axes.reshape(-1, 3)[free]                     # (N, 3)
+        lever = state.points_m[:, None, :] - state.points_m[joint][None, :, :]  # (n+1, N, 3)
+        jac = spatial.cross(np.broadcast_to(axes, lever.shape), lever)
+        jac *= (np.arange(n + 1)[:, None] > joint[None, :])[:, :, None]
+        return np.transpose(jac, (0, 2, 1))
+
+    def field_sensitivity(self, solution, field_t):
+        """
+        Return the Sensitivity of an equilibrium to the field it was solved in.
+
+        :param field_t: (3,) the field of the solve, tesla
+        :raises numpy.linalg.LinAlgError: the Hessian is singular (no isolated equilibrium)
+        """
+        chain, state, free, hessian = self._evaluate(solution, field_t)
+        n = chain.size
+        dg_db = -spatial.cross(state.axes, state.distal_moments[:, None, :]).reshape(-1, 3)
+        dq_free = -np.linalg.solve(hessian, dg_db[free])          # (N, 3)
+        dq = np.zeros((3 * n, 3))
+        dq[free] = dq_free
+        points = np.einsum('kxe,eb->kxb', self._points_jacobian(state, free), dq_free)
+        return Sensitivity(dq.reshape(n, 3, 3), points, hessian)
+
+    def moment_sensitivity(self, solution, field_t):
+        """
+        Return d q / d m (n, 3, n, 3): [joint, angle, link, moment component], rad/(A m^2).
+
+        The moments are the links' own, in the link frame (chain.moments_a_m2); the planner's
+        magnetisation directions chain onto them. Without magnet-to-magnet interaction (with
+        it the interaction depends on the moments too).
+
+        :raises ValueError: the model has dipoles
+        """
+        if self.dipoles:
+            raise ValueError('moment sensitivity is not available with dipoles=True')
+        chain, state, free, hessian = self._evaluate(solution, field_t)
+        n = chain.size
+        d_moment = torque_balance.residual_3dof(chain, solution.state, field_t)[2]
+        dg_dm = -d_moment.reshape(3 * n, 3 * n)                   # dg / dm, flattened
+        dq = np.zeros((3 * n, 3 * n))
+        dq[free] = -np.linalg.solve(hessian, dg_dm[free])
+        return dq.reshape(n, 3, n, 3)

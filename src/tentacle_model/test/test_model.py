@@ -1,0 +1,106 @@
+"""The model object: one state representation, carrying states, implicit sensitivities."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from tentacle_model import statics
+from tentacle_model.model import TentacleModel
+
+IN_PLANE = np.array([0.0, 0.005, 0.0])  # T: 90 degrees to the cantilever
+BRAIDED_FIELD = np.array([0.004, 0.012, 0.006])  # T: out of plane, as bench/model_tradeoff.py
+
+
+def test_one_state_representation_for_both_joint_models(cantilever):
+    spec = cantilever[0]
+    planar = TentacleModel(spec, dof=1, sublinks=8).solve(spec.length_m, IN_PLANE)
+    spatial = TentacleModel(spec, dof=3, sublinks=8).solve(spec.length_m, IN_PLANE)
+    assert planar.state.shape == spatial.state.shape == (8, 3)
+    assert np.all(planar.state[:, 1:] == 0.0)
+    assert TentacleModel.link_angles(planar.state) == pytest.approx(
+        planar.equilibrium.angles_rad, abs=1e-15)
+    # The same physics in the plane: the 3-DoF model finds the planar state.
+    assert spatial.state == pytest.approx(planar.state, abs=1e-7)
+
+
+@pytest.mark.parametrize('dof', [1, 3])
+def test_a_state_is_carried_along_the_insertion(braided, dof):
+    model = TentacleModel(braided, dof=dof, sublinks=2)
+    field = BRAIDED_FIELD if dof == 3 else BRAIDED_FIELD * [1, 1, 0]
+    state, previous, iterations = None, None, []
+    for inserted_m in (0.020, 0.025, 0.0333, 0.040, 0.050):  # partial links included
+        if state is not None:
+            state = model.carry(state, previous, inserted_m)
+        solution = model.solve(inserted_m, field, state)
+        cold = model.solve(inserted_m, field)
+        assert solution.equilibrium.converged and cold.equilibrium.converged
+        assert solution.state == pytest.approx(cold.state, abs=1e-7)  # the same branch
+        iterations.append((solution.equilibrium.iterations, cold.equilibrium.iterations))
+        state, previous = solution.state, inserted_m
+    assert sum(w for w, _ in iterations[1:]) < sum(c for _, c in iterations[1:])
+
+
+def test_a_state_of_the_wrong_length_is_refused_by_name(braided):
+    model = TentacleModel(braided, dof=3, sublinks=1)
+    state = model.solve(0.030, BRAIDED_FIELD).state
+    with pytest.raises(ValueError, match=r'state of shape \(3, 3\) for 4 links.*carry'):
+        model.solve(0.040, BRAIDED_FIELD, state)
+    assert model.carry(state, 0.030, 0.040).shape == (4, 3)
+
+
+def central_difference(solve, field, h):
+    """Return (d state / dB, d points / dB) by central differences of re-solves."""
+    d_state, d_points = [], []
+    for k in range(3):
+        step = np.zeros(3)
+        step[k] = h
+        plus, minus = solve(field + step), solve(field - step)
+        d_state.append((plus.state - minus.state) / (2 * h))
+        d_points.append((plus.points_m - minus.points_m) / (2 * h))
+    return np.stack(d_state, axis=-1), np.stack(d_points, axis=-1)
+
+
+@pytest.mark.parametrize('name, dof, dipoles', [
+    ('cantilever', 1, False), ('cantilever', 3, False), ('braided', 3, False),
+    ('braided', 1, True), ('braided', 3, True)])
+def test_field_sensitivity_matches_finite_differences(cantilever, braided, name, dof,
+                                                      dipoles):
+    spec = cantilever[0] if name == 'cantilever' else braided
+    field = IN_PLANE if name == 'cantilever' else BRAIDED_FIELD * (
+        [1, 1, 1] if dof == 3 else [1, 1, 0])
+    model = TentacleModel(spec, dof=dof, sublinks=4 if name == 'cantilever' else 2,
+                          dipoles=dipoles, tol=1e-13)
+    solution = model.solve(spec.length_m, field)
+    assert solution.equilibrium.converged and solution.equilibrium.stability > 0
+    sensitivity = model.field_sensitivity(solution, field)
+    d_state, d_points = central_difference(
+        lambda b: model.solve(spec.length_m, b, solution.state), field, 1e-6)
+    scale = np.abs(d_state).max()
+    assert sensitivity.state_per_t == pytest.approx(d_state, abs=1e-4 * scale)
+    assert sensitivity.points_per_t == pytest.approx(d_points,
+                                                     abs=1e-4 * np.abs(d_points).max())
+    lowest = np.linalg.eigvalsh(sensitivity.hessian)[0]
+    if dof == 3:  # the solver's coordinates: the same smallest eigenvalue
+        assert lowest == pytest.approx(solution.equilibrium.stability, rel=1e-6)
+    else:  # planar stability is in absolute link angles: another basis, the same sign
+        assert lowest > 0
+
+
+def test_moment_sensitivity_matches_finite_differences(braided):
+    model = TentacleModel(braided, dof=3, sublinks=1, tol=1e-13)
+    solution = model.solve(braided.length_m, BRAIDED_FIELD)
+    d_q = model.moment_sensitivity(solution, BRAIDED_FIELD)
+    chain = model.chain(braided.length_m)
+    h = 1e-6 * np.abs(chain.moments_a_m2).max()
+    for link, component in [(0, 1), (2, 0), (4, 2), (4, 1)]:
+        moved = []
+        for sign in (1, -1):
+            moments = chain.moments_a_m2.copy()
+            moments[link, component] += sign * h
+            eq = statics.solve(dataclasses.replace(chain, moments_a_m2=moments), BRAIDED_FIELD,
+                               dof=3, initial=solution.state, tol=1e-13)
+            moved.append(eq.angles_rad)
+        fd = (moved[0] - moved[1]) / (2 * h)
+        assert d_q[:, :, link, component] == pytest.approx(fd, abs=1e-4 * np.abs(fd).max())
+    with pytest.raises(ValueError, match='dipoles'):
+        TentacleModel(braided, dipoles=True).moment_sensitivity(solution, BRAIDED_FIELD)

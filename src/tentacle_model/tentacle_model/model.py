@@ -19,11 +19,11 @@ torque_balance.py, whose closed forms this shares). ``moment_sensitivity`` does 
 the links' magnetic moments (link frame), the planner's magnetisation unknowns.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from tentacle_model import planar, spatial, statics, torque_balance
-from tentacle_model.chain import discretise
+from tentacle_model.chain import Chain, discretise
 
 DEFAULT_ITERATIONS = 200
 HANG_GUARD_S = 60.0  # wall-clock limit: a guard only, never what decides a result
@@ -36,6 +36,7 @@ class Solution:
     inserted_m: float
     state: np.ndarray         # (n, 3) joint angles, rad
     equilibrium: statics.Equilibrium
+    chain: Chain              # what was solved (its moments are the ones solved with)
 
     @property
     def points_m(self):
@@ -45,11 +46,11 @@ class Solution:
 
 @dataclass(frozen=True)
 class Sensitivity:
-    """Derivatives of an equilibrium with respect to the field (world frame)."""
+    """Derivatives of an equilibrium with respect to p parameters (field, or moments)."""
 
-    state_per_t: np.ndarray   # (n, 3, 3) d q / d B: [joint, angle, field component], rad/T
-    points_per_t: np.ndarray  # (n + 1, 3, 3) d p / d B: [point, xyz, field component], m/T
-    hessian: np.ndarray       # (N, N) at the equilibrium in the free joint angles, N m/rad^2
+    state: np.ndarray    # (n, 3, p) d q / d parameter: [joint, angle, parameter], rad per unit
+    points: np.ndarray   # (n + 1, 3, p) d points / d parameter: [point, xyz, parameter], m
+    hessian: np.ndarray  # (N, N) at the equilibrium in the free joint angles, N m/rad^2
 
 
 class TentacleModel:
@@ -90,16 +91,23 @@ class TentacleModel:
         """Return the straight state (n, 3) at an inserted length."""
         return np.zeros((self.chain(inserted_m).size, 3))
 
-    def solve(self, inserted_m, field_t, state=None):
+    def solve(self, inserted_m, field_t, state=None, moments_a_m2=None):
         """
         Return the Solution at an inserted length in a field, from a state (default straight).
 
         :param inserted_m: length pushed past the base, m
         :param field_t: (3,) uniform field, tesla, world frame
         :param state: (n, 3) joint angles to start from, for this inserted length (see carry)
-        :raises ValueError: a state of another shape, a non-finite field
+        :param moments_a_m2: (n, 3) link moments (link frame) in place of the tentacle's own:
+            the planner's magnetisation
+        :raises ValueError: a state or moments of another shape, a non-finite field
         """
         chain = self.chain(inserted_m)
+        if moments_a_m2 is not None:
+            moments = np.asarray(moments_a_m2, dtype=float)
+            if moments.shape != (chain.size, 3) or not np.all(np.isfinite(moments)):
+                raise ValueError(f'moments must be finite, of shape ({chain.size}, 3)')
+            chain = replace(chain, moments_a_m2=moments)
         start = self.straight(inserted_m) if state is None else np.asarray(state, dtype=float)
         if start.shape != (chain.size, 3):
             raise ValueError(f'state of shape {start.shape} for {chain.size} links at '
@@ -108,7 +116,7 @@ class TentacleModel:
         eq = statics.solve(chain, field_t, self.gravity_m_s2, dof=self.dof, initial=initial,
                            tol=self.tol, max_iterations=self.max_iterations,
                            time_limit_s=HANG_GUARD_S, dipoles=self.dipoles)
-        return Solution(float(inserted_m), self.state_of(eq), eq)
+        return Solution(float(inserted_m), self.state_of(eq), eq, chain)
 
     def state_of(self, eq):
         """Return an Equilibrium's angles as joint angles (n, 3)."""
@@ -155,7 +163,7 @@ class TentacleModel:
         return every if self.dof == 3 else every[0::3]
 
     def _evaluate(self, solution, field_t):
-        chain = self.chain(solution.inserted_m)
+        chain = solution.chain
         pairs = chain.interacting_pairs() if self.dipoles and chain.interacting_pair_count() \
             else None
         contact = None if pairs is None else chain.contact_distances(pairs)
@@ -176,23 +184,18 @@ class TentacleModel:
 
     def field_sensitivity(self, solution, field_t):
         """
-        Return the Sensitivity of an equilibrium to the field it was solved in.
+        Return the Sensitivity of an equilibrium to the field it was solved in (p = 3).
 
         :param field_t: (3,) the field of the solve, tesla
         :raises numpy.linalg.LinAlgError: the Hessian is singular (no isolated equilibrium)
         """
         chain, state, free, hessian = self._evaluate(solution, field_t)
-        n = chain.size
         dg_db = -spatial.cross(state.axes, state.distal_moments[:, None, :]).reshape(-1, 3)
-        dq_free = -np.linalg.solve(hessian, dg_db[free])          # (N, 3)
-        dq = np.zeros((3 * n, 3))
-        dq[free] = dq_free
-        points = np.einsum('kxe,eb->kxb', self._points_jacobian(state, free), dq_free)
-        return Sensitivity(dq.reshape(n, 3, 3), points, hessian)
+        return self._implicit(chain, state, free, hessian, dg_db)
 
     def moment_sensitivity(self, solution, field_t):
         """
-        Return d q / d m (n, 3, n, 3): [joint, angle, link, moment component], rad/(A m^2).
+        Return the Sensitivity to each link's moment (p = 3n: link, component), per A m^2.
 
         The moments are the links' own, in the link frame (chain.moments_a_m2); the planner's
         magnetisation directions chain onto them. Without magnet-to-magnet interaction (with
@@ -205,7 +208,13 @@ class TentacleModel:
         chain, state, free, hessian = self._evaluate(solution, field_t)
         n = chain.size
         d_moment = torque_balance.residual_3dof(chain, solution.state, field_t)[2]
-        dg_dm = -d_moment.reshape(3 * n, 3 * n)                   # dg / dm, flattened
-        dq = np.zeros((3 * n, 3 * n))
-        dq[free] = -np.linalg.solve(hessian, dg_dm[free])
-        return dq.reshape(n, 3, n, 3)
+        return self._implicit(chain, state, free, hessian, -d_moment.reshape(3 * n, 3 * n))
+
+    def _implicit(self, chain, state, free, hessian, dg_dp):
+        """Return the Sensitivity from dg/dp (3n, p) by H dq = -(dg/dp) dp."""
+        n, p = chain.size, dg_dp.shape[1]
+        dq_free = -np.linalg.solve(hessian, dg_dp[free])           # (N, p)
+        dq = np.zeros((3 * n, p))
+        dq[free] = dq_free
+        points = np.einsum('kxe,ep->kxp', self._points_jacobian(state, free), dq_free)
+        return Sensitivity(dq.reshape(n, 3, p), points, hessian)

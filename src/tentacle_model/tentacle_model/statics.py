@@ -153,6 +153,13 @@ class _Planar:
         step, info = ptsv(diagonal, banded[0, 1:], -g)[2:]  # positive definite: plain Newton
         if info == 0:
             return step
+        # Indefinite: shift just past the most negative eigenvalue (a compiled bisection),
+        # rather than searching for a shift that factorises (ten tries on average).
+        lowest = float(planar.smallest_eigenvalue(diagonal, banded[0, 1:]))
+        shift = -lowest + 1e-6 * max(np.max(np.abs(diagonal)), 1e-300)
+        step, info = ptsv(diagonal + shift, banded[0, 1:], -g)[2:]
+        if info == 0:
+            return step
         return _shifted_solve(lambda shift: solveh_banded(
             banded + np.array([[0.0], [shift]]), g, check_finite=False), diagonal, g)
 

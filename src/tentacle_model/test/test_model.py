@@ -76,9 +76,8 @@ def test_field_sensitivity_matches_finite_differences(cantilever, braided, name,
     d_state, d_points = central_difference(
         lambda b: model.solve(spec.length_m, b, solution.state), field, 1e-6)
     scale = np.abs(d_state).max()
-    assert sensitivity.state_per_t == pytest.approx(d_state, abs=1e-4 * scale)
-    assert sensitivity.points_per_t == pytest.approx(d_points,
-                                                     abs=1e-4 * np.abs(d_points).max())
+    assert sensitivity.state == pytest.approx(d_state, abs=1e-4 * scale)
+    assert sensitivity.points == pytest.approx(d_points, abs=1e-4 * np.abs(d_points).max())
     lowest = np.linalg.eigvalsh(sensitivity.hessian)[0]
     if dof == 3:  # the solver's coordinates: the same smallest eigenvalue
         assert lowest == pytest.approx(solution.equilibrium.stability, rel=1e-6)
@@ -89,7 +88,9 @@ def test_field_sensitivity_matches_finite_differences(cantilever, braided, name,
 def test_moment_sensitivity_matches_finite_differences(braided):
     model = TentacleModel(braided, dof=3, sublinks=1, tol=1e-13)
     solution = model.solve(braided.length_m, BRAIDED_FIELD)
-    d_q = model.moment_sensitivity(solution, BRAIDED_FIELD)
+    sensitivity = model.moment_sensitivity(solution, BRAIDED_FIELD)
+    d_q = sensitivity.state.reshape(5, 3, 5, 3)
+    d_p = sensitivity.points.reshape(6, 3, 5, 3)
     chain = model.chain(braided.length_m)
     h = 1e-6 * np.abs(chain.moments_a_m2).max()
     for link, component in [(0, 1), (2, 0), (4, 2), (4, 1)]:
@@ -99,8 +100,11 @@ def test_moment_sensitivity_matches_finite_differences(braided):
             moments[link, component] += sign * h
             eq = statics.solve(dataclasses.replace(chain, moments_a_m2=moments), BRAIDED_FIELD,
                                dof=3, initial=solution.state, tol=1e-13)
-            moved.append(eq.angles_rad)
-        fd = (moved[0] - moved[1]) / (2 * h)
+            moved.append((eq.angles_rad, eq.points_m))
+        fd = (moved[0][0] - moved[1][0]) / (2 * h)
         assert d_q[:, :, link, component] == pytest.approx(fd, abs=1e-4 * np.abs(fd).max())
+        fd_points = (moved[0][1] - moved[1][1]) / (2 * h)
+        assert d_p[:, :, link, component] == pytest.approx(
+            fd_points, abs=1e-4 * np.abs(fd_points).max())
     with pytest.raises(ValueError, match='dipoles'):
         TentacleModel(braided, dipoles=True).moment_sensitivity(solution, BRAIDED_FIELD)

@@ -1,0 +1,402 @@
+"""
+The planner's optimisation: a magnetisation direction per segment and a field per step.
+
+Unknowns: the direction of each magnetised segment's magnetisation in its own link frame
+(magnitude fixed: one magnetising step; an angle in the link's x-y plane, and an elevation
+out of it unless the magnetisation must be planar) and the uniform field of every insertion
+step (in the base plane for a planar model). The objective is what the tentacle will do:
+the equilibrium of the forward model at every step, warm-started along the insertion as the
+rig runs it, against the follow-the-leader target of that step (its joints and tip on the
+path), as the mean squared distance over the tentacle length squared. Its gradient is
+exact: the equilibrium's sensitivities to field and moments (tentacle_model.model) chained
+onto the unknowns; an equilibrium at step k depends on the field of step k only.
+
+Constraints (SLSQP): per-axis field limits, a total field limit, a largest field change
+between steps, a largest angle between neighbouring magnetisations; a distal segment held
+axial, or every segment axial (the tip-driven baseline) removes those unknowns. Global
+search is a seeded multi-start; the best plan whose every step is a stable converged
+equilibrium wins. A seed reproduces a plan exactly: budgets, not clocks, end every stage.
+"""
+
+from dataclasses import dataclass, field
+import math
+
+import numpy as np
+from scipy.optimize import least_squares, minimize
+
+MILLITESLA = 1e-3  # field unknowns are in mT: of the order of the angles, for the optimiser
+
+
+@dataclass(frozen=True)
+class Constraints:
+    """What a plan must respect; None: no such limit."""
+
+    max_field_t: float | None = None          # each coil axis, every step, T
+    max_total_field_t: float | None = None    # |B| at every step, T
+    max_field_change_t: float | None = None   # each axis, between consecutive steps, T
+    planar_magnetisation: bool = False        # directions in the link's x-y plane
+    max_neighbour_angle_rad: float | None = None
+    distal_axial: bool = False                # the tip segment magnetised along its axis
+    tip_driven: bool = False                  # every segment axial: fields only (baseline)
+
+
+@dataclass(frozen=True)
+class Step:
+    """One insertion step of a plan, as the forward model predicts it."""
+
+    inserted_m: float
+    field_t: np.ndarray            # (3,) world frame
+    points_m: np.ndarray           # (n + 1, 3) predicted joints and tip
+    shape_rms_m: float
+    tip_error_m: float
+    stability: float               # smallest Hessian eigenvalue (> 0: stable)
+    converged: bool
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Magnetisation directions (segments, 3; link frame; zero for passive), fields, steps."""
+
+    directions: np.ndarray
+    steps: list
+    objective: float
+    evaluations: int
+    flags: list = field(default_factory=list)
+
+    @property
+    def fields_t(self):
+        """Return the fields (steps, 3), T."""
+        return np.array([s.field_t for s in self.steps])
+
+    @property
+    def shape_rms_m(self):
+        """Return the shape error over every step: RMS of the point distances, m."""
+        return float(np.sqrt(np.mean([s.shape_rms_m ** 2 for s in self.steps])))
+
+
+class Problem:
+    """A plan's unknowns, objective with its gradient, and constraints."""
+
+    def __init__(self, model, steps_m, targets_m, constraints=Constraints()):
+        """
+        Set up the problem.
+
+        :param model: a TentacleModel (its joint model, sub-links, gravity, dipoles)
+        :param steps_m: inserted lengths of the key steps, m, increasing
+        :param targets_m: per step, (n_k + 1, 3) the target of the chain's joints and tip, m
+        :param constraints: Constraints
+        """
+        if model.dipoles:
+            raise ValueError('planning with dipoles is not supported yet: plan without, '
+                             'then verify with them')
+        self.model, self.constraints = model, constraints
+        self.steps_m = [float(s) for s in steps_m]
+        self.targets = [np.asarray(t, dtype=float) for t in targets_m]
+        self.length_m = model.spec.length_m
+        for s, t in zip(self.steps_m, self.targets):
+            if t.shape != (model.chain(s).size + 1, 3):
+                raise ValueError(f'target at {s:g} m has shape {t.shape}, not '
+                                 f'({model.chain(s).size + 1}, 3)')
+        strength = [float(np.linalg.norm(seg.magnetisation_a_per_m))
+                    for seg in model.spec.segments]
+        self.magnetised = [i for i, m in enumerate(strength) if m > 0]
+        last = len(model.spec.segments) - 1
+        fixed = set(self.magnetised) if constraints.tip_driven else (
+            {last} & set(self.magnetised) if constraints.distal_axial else set())
+        self.free_segments = [i for i in self.magnetised if i not in fixed]
+        self.angles_per_segment = 1 if constraints.planar_magnetisation else 2
+        self.field_size = 2 if model.dof == 1 else 3
+        self.base_plane = model.spec.base_rotation[:, :2]
+        # Each link's moment magnitude is fixed; its direction is its segment's.
+        self._magnitudes = {s: np.linalg.norm(model.chain(s).moments_a_m2, axis=1)
+                            for s in self.steps_m}
+        self.evaluations = 0
+
+    # -- unknowns ---------------------------------------------------------------------------
+    @property
+    def size(self):
+        """Return the number of unknowns."""
+        return (len(self.free_segments) * self.angles_per_segment
+                + len(self.steps_m) * self.field_size)
+
+    def unpack(self, x):
+        """Return (directions (segments, 3) link frame, fields (steps, 3) world T)."""
+        x = np.asarray(x, dtype=float)
+        directions = np.zeros((len(self.model.spec.segments), 3))
+        for i in self.magnetised:
+            directions[i] = (1.0, 0.0, 0.0)
+        k = 0
+        for i in self.free_segments:
+            azimuth = x[k]
+            elevation = 0.0 if self.angles_per_segment == 1 else x[k + 1]
+            directions[i] = _direction(azimuth, elevation)
+            k += self.angles_per_segment
+        fields = x[k:].reshape(len(self.steps_m), self.field_size) * MILLITESLA
+        if self.field_size == 2:
+            fields = fields @ self.base_plane.T
+        return directions, fields
+
+    def pack(self, directions, fields_t):
+        """Return x for directions (segments, 3) and fields (steps, 3) (inverse of unpack)."""
+        values = []
+        for i in self.free_segments:
+            d = np.asarray(directions[i], dtype=float)
+            d = d / np.linalg.norm(d)
+            values.append(math.atan2(d[1], d[0]))
+            if self.angles_per_segment == 2:
+                values.append(math.asin(np.clip(d[2], -1.0, 1.0)))
+        fields = np.asarray(fields_t, dtype=float)
+        if self.field_size == 2:
+            fields = fields @ self.base_plane
+        return np.concatenate([values, fields.reshape(-1) / MILLITESLA])
+
+    def _moments(self, directions, inserted_m):
+        chain = self.model.chain(inserted_m)
+        return self._magnitudes[inserted_m][:, None] * directions[chain.segment_index]
+
+    # -- forward model and objective --------------------------------------------------------
+    def simulate(self, x):
+        """Return the Solutions of every step, warm-started along the insertion."""
+        directions, fields = self.unpack(x)
+        solutions, state, previous = [], None, None
+        for inserted_m, field_t in zip(self.steps_m, fields):
+            if state is not None:
+                state = self.model.carry(state, previous, inserted_m)
+            solution = self.model.solve(inserted_m, field_t, state,
+                                        self._moments(directions, inserted_m))
+            solutions.append(solution)
+            state, previous = solution.state, inserted_m
+        return solutions
+
+    def residuals(self, x):
+        """
+        Return (r, J): r the scaled point residuals of every step, J = dr/dx.
+
+        r stacks (p - t) / (L sqrt(steps n_k)) over the steps' points, so that sum r^2 is
+        the objective; J comes from the equilibrium's sensitivities.
+        """
+        self.evaluations += 1
+        directions, fields = self.unpack(x)
+        solutions = self.simulate(x)
+        n_dir = len(self.free_segments) * self.angles_per_segment
+        rows, jacobians = [], []
+        for k, (solution, target, field_t) in enumerate(zip(solutions, self.targets, fields)):
+            weight = 1.0 / (self.length_m * math.sqrt(len(self.steps_m) * len(target)))
+            jac = np.zeros((target.size, self.size))
+            if not solution.equilibrium.converged or not np.all(np.isfinite(solution.points_m)):
+                rows.append(np.full(target.size, 10.0))  # outside what the rig can rely on
+                jacobians.append(jac)
+                continue
+            rows.append(weight * (solution.points_m - target).reshape(-1))
+            d_field = self.model.field_sensitivity(solution, field_t).points.reshape(-1, 3)
+            d_field = d_field * (weight * MILLITESLA)
+            if self.field_size == 2:
+                d_field = d_field @ self.base_plane
+            start = n_dir + k * self.field_size
+            jac[:, start:start + self.field_size] = d_field
+            if n_dir:
+                jac[:, :n_dir] = weight * self._direction_jacobian(solution, field_t, x)
+            jacobians.append(jac)
+        return np.concatenate(rows), np.vstack(jacobians)
+
+    def objective(self, x):
+        """Return (objective, gradient (size,)) at x; the objective is dimensionless."""
+        r, jac = self.residuals(x)
+        return float(r @ r), 2 * jac.T @ r
+
+    def _direction_jacobian(self, solution, field_t, x):
+        """Return d points / d direction angles ((n + 1) 3, angles) from moment sensitivity."""
+        chain = solution.chain
+        d_points = self.model.moment_sensitivity(solution, field_t).points  # (n+1, 3, 3n)
+        d_points = d_points.reshape(-1, chain.size, 3)
+        magnitudes = self._magnitudes[solution.inserted_m]
+        out = np.zeros((d_points.shape[0], len(self.free_segments) * self.angles_per_segment))
+        k = 0
+        for i in self.free_segments:
+            links = chain.segment_index == i
+            azimuth = x[k]
+            elevation = 0.0 if self.angles_per_segment == 1 else x[k + 1]
+            pulled = np.einsum('rlc,l->rc', d_points[:, links], magnitudes[links])
+            d_azimuth, d_elevation = _direction_derivatives(azimuth, elevation)
+            out[:, k] = pulled @ d_azimuth
+            if self.angles_per_segment == 2:
+                out[:, k + 1] = pulled @ d_elevation
+            k += self.angles_per_segment
+        return out
+
+    # -- constraints ------------------------------------------------------------------------
+    @property
+    def _axes_are_unknowns(self):
+        """Return whether each field unknown is one coil axis (so its limit is a bound)."""
+        if self.field_size == 3:
+            return True
+        # A base plane spanned by two coil axes (the usual rig): still one axis each.
+        return bool(np.all(np.sum(np.abs(self.base_plane) > 1e-12, axis=0) == 1))
+
+    def bounds(self):
+        """Return bounds: the per-axis field limit where the unknowns are the axes."""
+        n_dir = len(self.free_segments) * self.angles_per_segment
+        limit = self.constraints.max_field_t
+        field_bound = (None, None) if limit is None or not self._axes_are_unknowns else (
+            -limit / MILLITESLA, limit / MILLITESLA)
+        return [(None, None)] * n_dir + [field_bound] * (len(self.steps_m) * self.field_size)
+
+    def inequalities(self):
+        """Return SLSQP inequality constraints (fun(x) >= 0) with their Jacobians."""
+        c, out = self.constraints, []
+        n_dir = len(self.free_segments) * self.angles_per_segment
+        steps = len(self.steps_m)
+        # world field = F x[n_dir:] (linear): F maps the field unknowns to (steps * 3) axes
+        to_world = np.kron(np.eye(steps), (self.base_plane if self.field_size == 2
+                                           else np.eye(3)) * MILLITESLA)
+        to_world = np.hstack([np.zeros((3 * steps, n_dir)), to_world])
+        if c.max_field_t is not None and not self._axes_are_unknowns:
+            out += [_linear(to_world, c.max_field_t), _linear(-to_world, c.max_field_t)]
+        if c.max_field_change_t is not None and steps > 1:
+            change = (np.kron(np.eye(steps)[1:] - np.eye(steps)[:-1], np.eye(3))) @ to_world
+            out += [_linear(change, c.max_field_change_t),
+                    _linear(-change, c.max_field_change_t)]
+        if c.max_total_field_t is not None:
+            def total(x):
+                b = (to_world @ x).reshape(steps, 3)
+                return (c.max_total_field_t ** 2 - np.sum(b ** 2, axis=1)) / MILLITESLA ** 2
+
+            def total_jac(x):
+                b = (to_world @ x).reshape(steps, 3)
+                rows = -2 * b[:, :, None] * to_world.reshape(steps, 3, -1)
+                return rows.sum(axis=1) / MILLITESLA ** 2
+            out.append({'type': 'ineq', 'fun': total, 'jac': total_jac})
+        pairs = [(a, b) for a, b in zip(self.magnetised, self.magnetised[1:])
+                 if a + 1 == b]
+        if c.max_neighbour_angle_rad is not None and pairs:
+            cos_limit = math.cos(c.max_neighbour_angle_rad)
+
+            def neighbours(x):
+                d = self.unpack(x)[0]
+                return np.array([d[a] @ d[b] - cos_limit for a, b in pairs])
+
+            def neighbours_jac(x):
+                eps = 1e-7  # the directions' dot products: smooth and cheap to difference
+                base = neighbours(x)
+                jac = np.zeros((len(pairs), len(x)))
+                for j in range(n_dir):
+                    moved = x.copy()
+                    moved[j] += eps
+                    jac[:, j] = (neighbours(moved) - base) / eps
+                return jac
+            out.append({'type': 'ineq', 'fun': neighbours, 'jac': neighbours_jac})
+        return out
+
+    # -- results ----------------------------------------------------------------------------
+    def plan(self, x, flags=()):
+        """Return the Plan at x, verified in the forward model, with its flags."""
+        directions, fields = self.unpack(x)
+        steps, flags = [], list(flags)
+        for k, (solution, target, field_t) in enumerate(zip(self.simulate(x), self.targets,
+                                                            fields)):
+            eq = solution.equilibrium
+            distances = np.linalg.norm(solution.points_m - target, axis=1)
+            steps.append(Step(solution.inserted_m, field_t, solution.points_m,
+                              float(np.sqrt(np.mean(distances ** 2))), float(distances[-1]),
+                              float(eq.stability), eq.converged))
+            if not eq.converged:
+                flags.append(f'step {k + 1} did not converge: {eq.reason}')
+            elif not eq.stability > 0:
+                flags.append(f'unstable step {k + 1} (stability {eq.stability:.3g})')
+        flags += self.violations(directions, fields)
+        return Plan(directions, steps, float(self.objective(x)[0]), self.evaluations, flags)
+
+    def violations(self, directions, fields, tolerance=1e-6):
+        """Return what breaks a constraint, one line each (relative tolerance)."""
+        c, out = self.constraints, []
+        for k, b in enumerate(fields):
+            if c.max_field_t is not None and np.max(np.abs(b)) > c.max_field_t * (1 + tolerance):
+                out.append(f'field over the per-axis limit at step {k + 1}: '
+                           f'{np.max(np.abs(b)) * 1e3:.3f} mT')
+            if c.max_total_field_t is not None and np.linalg.norm(b) > c.max_total_field_t * (
+                    1 + tolerance):
+                out.append(f'field over the total limit at step {k + 1}: '
+                           f'{np.linalg.norm(b) * 1e3:.3f} mT')
+            if k and c.max_field_change_t is not None and np.max(
+                    np.abs(b - fields[k - 1])) > c.max_field_change_t * (1 + tolerance):
+                out.append(f'field change over the limit into step {k + 1}')
+        if c.max_neighbour_angle_rad is not None:
+            for a, b in zip(self.magnetised, self.magnetised[1:]):
+                angle = math.acos(np.clip(directions[a] @ directions[b], -1.0, 1.0))
+                if a + 1 == b and angle > c.max_neighbour_angle_rad + 1e-4:
+                    out.append(f'segments {a + 1} and {b + 1} magnetised '
+                               f'{math.degrees(angle):.1f} deg apart')
+        return out
+
+
+def _direction(azimuth, elevation):
+    return np.array([math.cos(elevation) * math.cos(azimuth),
+                     math.cos(elevation) * math.sin(azimuth), math.sin(elevation)])
+
+
+def _direction_derivatives(azimuth, elevation):
+    ca, sa, ce, se = (math.cos(azimuth), math.sin(azimuth), math.cos(elevation),
+                      math.sin(elevation))
+    return np.array([-ce * sa, ce * ca, 0.0]), np.array([-se * ca, -se * sa, ce])
+
+
+def _linear(matrix, limit):
+    """Return the constraint limit / mT - matrix x / mT >= 0 (one row each)."""
+    return {'type': 'ineq', 'fun': lambda x: (limit - matrix @ x) / MILLITESLA,
+            'jac': lambda x: -matrix / MILLITESLA}
+
+
+def optimise(problem, *, seed=0, starts=8, iterations=100, initial=None, progress=None):
+    """
+    Return the best Plan over a seeded multi-start, each start fitted by Gauss-Newton.
+
+    :param starts: random starts (directions uniform, fields within the limits)
+    :param iterations: model evaluations per start (and SLSQP iterations where limits other
+        than per-axis bounds apply): the budget that ends each start
+    :param initial: an x to try first (e.g. the tip-driven baseline or a previous plan)
+    :param progress: called with (start index, starts, best objective so far)
+    """
+    rng = np.random.default_rng(seed)
+    limit = problem.constraints.max_field_t or problem.constraints.max_total_field_t or 0.02
+    n_dir = len(problem.free_segments) * problem.angles_per_segment
+    candidates = [] if initial is None else [np.asarray(initial, dtype=float)]
+    for _ in range(starts):
+        directions = rng.uniform(-math.pi, math.pi, n_dir)
+        if problem.angles_per_segment == 2:
+            directions[1::2] *= 0.25  # elevations within +-45 deg
+        fields = rng.uniform(-0.5, 0.5, problem.size - n_dir) * limit / MILLITESLA
+        candidates.append(np.concatenate([directions, fields]))
+    box = problem.bounds()
+    lower = np.array([-np.inf if b[0] is None else b[0] for b in box])
+    upper = np.array([np.inf if b[1] is None else b[1] for b in box])
+    constrained = bool(problem.inequalities())
+    best, best_key = None, None
+    for index, x0 in enumerate(candidates):
+        # Gauss-Newton on the residuals (trust region, box bounds): the strong tool for a
+        # least-squares fit; then SLSQP for the limits that are not a box, if any.
+        cache = {}
+
+        def fun(x):
+            cache['x'], cache['value'] = x.copy(), problem.residuals(x)
+            return cache['value'][0]
+
+        def jac(x):
+            if 'x' not in cache or not np.array_equal(cache['x'], x):
+                fun(x)
+            return cache['value'][1]
+
+        x = least_squares(fun, np.clip(x0, lower, upper), jac=jac, bounds=(lower, upper),
+                          method='trf', max_nfev=iterations, xtol=1e-12, ftol=1e-14,
+                          gtol=1e-12).x
+        if constrained:
+            x = minimize(problem.objective, x, jac=True, method='SLSQP', bounds=box,
+                         constraints=problem.inequalities(),
+                         options={'maxiter': iterations, 'ftol': 1e-14}).x
+        plan = problem.plan(x)
+        # A plan that relies on no unstable step and breaks no limit beats any that does.
+        key = (len(plan.flags), plan.objective)
+        if best_key is None or key < best_key:
+            best, best_key = plan, key
+        if progress is not None:
+            progress(index + 1, len(candidates), best.objective)
+    return best

@@ -1,0 +1,101 @@
+"""The planner's optimisation against plans with a known answer, and its exact gradient."""
+
+import math
+import pathlib
+
+import numpy as np
+import pytest
+from tentacle_model.model import TentacleModel
+from tentacle_model.tentacle_spec import load_tentacle
+from tentacle_planner.optimise import Constraints, optimise, Problem
+
+ROOT = pathlib.Path(__file__).resolve().parents[3]
+STEPS_M = (0.02, 0.03, 0.04, 0.05)
+
+
+@pytest.fixture(scope='module')
+def braided():
+    return load_tentacle(ROOT / 'config' / 'tentacles' / 'braided_chapter5.yaml')
+
+
+def known_plan(spec, dof, constraints, seed=3):
+    """Return (model, true x, targets): targets are what the model does for the true x."""
+    model = TentacleModel(spec, dof=dof, sublinks=1)
+    blank = [np.zeros((model.chain(s).size + 1, 3)) for s in STEPS_M]
+    problem = Problem(model, STEPS_M, blank, constraints)
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-1.0, 1.0, problem.size)
+    x[problem.size - len(STEPS_M) * problem.field_size:] *= 10.0  # +-10 mT
+    solutions = problem.simulate(x)
+    assert all(s.equilibrium.converged and s.equilibrium.stability > 0 for s in solutions)
+    return model, x, [s.points_m for s in solutions]
+
+
+@pytest.mark.parametrize('dof', [1, 3])
+def test_the_gradient_is_exact(braided, dof):
+    constraints = Constraints(planar_magnetisation=dof == 1)
+    model, _, targets = known_plan(braided, dof, constraints)
+    problem = Problem(model, STEPS_M, targets, constraints)
+    x = np.random.default_rng(7).uniform(-1.0, 1.0, problem.size)
+    value, gradient = problem.objective(x)
+    assert value > 1e-4
+    h = 1e-6
+    fd = np.array([(problem.objective(x + e)[0] - problem.objective(x - e)[0]) / (2 * h)
+                   for e in np.eye(problem.size) * h])
+    assert gradient == pytest.approx(fd, abs=1e-6 * np.abs(fd).max())
+
+
+def test_a_reachable_plan_is_found_exactly_and_reproduced_by_its_seed(braided):
+    constraints = Constraints(max_field_t=0.02)
+    model, x_true, targets = known_plan(braided, 3, constraints)
+    problem = Problem(model, STEPS_M, targets, constraints)
+    plan = optimise(problem, seed=1, starts=12)
+    assert plan.shape_rms_m < 1e-6 * braided.length_m
+    assert plan.flags == []
+    assert all(step.stability > 0 and step.converged for step in plan.steps)
+    directions, fields = problem.unpack(x_true)
+    assert plan.fields_t == pytest.approx(fields, abs=1e-6)  # the answer, not just a fit
+    again = optimise(Problem(model, STEPS_M, targets, constraints), seed=1, starts=12)
+    assert np.array_equal(again.fields_t, plan.fields_t)
+    assert np.array_equal(again.directions, plan.directions)
+
+
+def test_field_limits_hold_and_a_target_out_of_reach_is_approached(braided):
+    # The known plan needs up to 10 mT; with 4 mT per axis the best plan sits on the limit.
+    model, _, targets = known_plan(braided, 3, Constraints())
+    constraints = Constraints(max_field_t=0.004, max_field_change_t=0.003,
+                              max_total_field_t=0.006)
+    problem = Problem(model, STEPS_M, targets, constraints)
+    plan = optimise(problem, seed=0, starts=3)
+    fields = plan.fields_t
+    assert np.max(np.abs(fields)) <= 0.004 * (1 + 1e-6)
+    assert np.max(np.linalg.norm(fields, axis=1)) <= 0.006 * (1 + 1e-6)
+    assert np.max(np.abs(np.diff(fields, axis=0))) <= 0.003 * (1 + 1e-6)
+    assert plan.flags == [] or all('unstable' in f for f in plan.flags)
+    assert problem.violations(plan.directions, fields) == []
+
+
+def test_the_tip_driven_baseline_plans_fields_only(braided):
+    model, _, targets = known_plan(braided, 3, Constraints())
+    constraints = Constraints(max_field_t=0.02, tip_driven=True)
+    problem = Problem(model, STEPS_M, targets, constraints)
+    assert problem.size == 3 * len(STEPS_M)
+    baseline = optimise(problem, seed=0, starts=2)
+    assert np.all(baseline.directions[:, 0] == 1.0)  # every magnetisation axial
+    shaped = optimise(Problem(model, STEPS_M, targets, Constraints(max_field_t=0.02)),
+                      seed=1, starts=12)
+    assert shaped.shape_rms_m < 0.1 * baseline.shape_rms_m
+
+
+def test_neighbouring_magnetisations_keep_within_the_angle_limit(braided):
+    model, _, targets = known_plan(braided, 1, Constraints(planar_magnetisation=True))
+    limit = math.radians(60)
+    constraints = Constraints(max_field_t=0.02, planar_magnetisation=True,
+                              max_neighbour_angle_rad=limit, distal_axial=True)
+    problem = Problem(model, STEPS_M, targets, constraints)
+    plan = optimise(problem, seed=0, starts=3)
+    d = plan.directions
+    angles = [math.acos(np.clip(d[i] @ d[i + 1], -1, 1)) for i in range(len(d) - 1)]
+    assert max(angles) <= limit + 1e-4
+    assert d[-1] == pytest.approx([1.0, 0.0, 0.0])  # the distal segment axial
+    assert np.all(d[:, 2] == 0.0)  # planar magnetisation

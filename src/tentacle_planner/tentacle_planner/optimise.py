@@ -77,7 +77,8 @@ class Plan:
 class Problem:
     """A plan's unknowns, objective with its gradient, and constraints."""
 
-    def __init__(self, model, steps_m, targets_m, constraints=Constraints()):
+    def __init__(self, model, steps_m, targets_m, constraints=Constraints(),
+                 directions=None, start=None):
         """
         Set up the problem.
 
@@ -85,6 +86,9 @@ class Problem:
         :param steps_m: inserted lengths of the key steps, m, increasing
         :param targets_m: per step, (n_k + 1, 3) the target of the chain's joints and tip, m
         :param constraints: Constraints
+        :param directions: (segments, 3) magnetisation directions to hold fixed (fields only)
+        :param start: (state, inserted_m) the rig is in before the first step (default: the
+            first step starts straight)
         """
         if model.dipoles:
             raise ValueError('planning with dipoles is not supported yet: plan without, '
@@ -101,9 +105,11 @@ class Problem:
                     for seg in model.spec.segments]
         self.magnetised = [i for i, m in enumerate(strength) if m > 0]
         last = len(model.spec.segments) - 1
-        fixed = set(self.magnetised) if constraints.tip_driven else (
+        fixed = set(self.magnetised) if constraints.tip_driven or directions is not None else (
             {last} & set(self.magnetised) if constraints.distal_axial else set())
         self.free_segments = [i for i in self.magnetised if i not in fixed]
+        self.fixed_directions = None if directions is None else np.asarray(directions, float)
+        self.start = start
         self.angles_per_segment = 1 if constraints.planar_magnetisation else 2
         self.field_size = 2 if model.dof == 1 else 3
         self.base_plane = model.spec.base_rotation[:, :2]
@@ -124,7 +130,8 @@ class Problem:
         x = np.asarray(x, dtype=float)
         directions = np.zeros((len(self.model.spec.segments), 3))
         for i in self.magnetised:
-            directions[i] = (1.0, 0.0, 0.0)
+            directions[i] = (1.0, 0.0, 0.0) if self.fixed_directions is None else \
+                self.fixed_directions[i]
         k = 0
         for i in self.free_segments:
             azimuth = x[k]
@@ -158,7 +165,8 @@ class Problem:
     def simulate(self, x):
         """Return the Solutions of every step, warm-started along the insertion."""
         directions, fields = self.unpack(x)
-        solutions, state, previous = [], None, None
+        solutions = []
+        state, previous = (None, None) if self.start is None else self.start
         for inserted_m, field_t in zip(self.steps_m, fields):
             if state is not None:
                 state = self.model.carry(state, previous, inserted_m)
@@ -366,33 +374,9 @@ def optimise(problem, *, seed=0, starts=8, iterations=100, initial=None, progres
             directions[1::2] *= 0.25  # elevations within +-45 deg
         fields = rng.uniform(-0.5, 0.5, problem.size - n_dir) * limit / MILLITESLA
         candidates.append(np.concatenate([directions, fields]))
-    box = problem.bounds()
-    lower = np.array([-np.inf if b[0] is None else b[0] for b in box])
-    upper = np.array([np.inf if b[1] is None else b[1] for b in box])
-    constrained = bool(problem.inequalities())
     best, best_key = None, None
     for index, x0 in enumerate(candidates):
-        # Gauss-Newton on the residuals (trust region, box bounds): the strong tool for a
-        # least-squares fit; then SLSQP for the limits that are not a box, if any.
-        cache = {}
-
-        def fun(x):
-            cache['x'], cache['value'] = x.copy(), problem.residuals(x)
-            return cache['value'][0]
-
-        def jac(x):
-            if 'x' not in cache or not np.array_equal(cache['x'], x):
-                fun(x)
-            return cache['value'][1]
-
-        x = least_squares(fun, np.clip(x0, lower, upper), jac=jac, bounds=(lower, upper),
-                          method='trf', max_nfev=iterations, xtol=1e-12, ftol=1e-14,
-                          gtol=1e-12).x
-        if constrained:
-            x = minimize(problem.objective, x, jac=True, method='SLSQP', bounds=box,
-                         constraints=problem.inequalities(),
-                         options={'maxiter': iterations, 'ftol': 1e-14}).x
-        plan = problem.plan(x)
+        plan = problem.plan(fit(problem, x0, iterations))
         # A plan that relies on no unstable step and breaks no limit beats any that does.
         key = (len(plan.flags), plan.objective)
         if best_key is None or key < best_key:
@@ -400,3 +384,38 @@ def optimise(problem, *, seed=0, starts=8, iterations=100, initial=None, progres
         if progress is not None:
             progress(index + 1, len(candidates), best.objective)
     return best
+
+
+def fit(problem, x0, iterations=100):
+    """
+    Return x after Gauss-Newton from x0, then SLSQP for the limits that are not bounds.
+
+    Trust-region Gauss-Newton on the residuals with the per-axis field limits as bounds is
+    the strong tool for this least-squares fit; SLSQP polishes only where total-field,
+    field-change or neighbour-angle limits apply.
+
+    :param iterations: model evaluations (Gauss-Newton) and SLSQP iterations: the budget
+    """
+    box = problem.bounds()
+    lower = np.array([-np.inf if b[0] is None else b[0] for b in box])
+    upper = np.array([np.inf if b[1] is None else b[1] for b in box])
+    cache = {}
+
+    def fun(x):
+        cache['x'], cache['value'] = x.copy(), problem.residuals(x)
+        return cache['value'][0]
+
+    def jac(x):
+        if 'x' not in cache or not np.array_equal(cache['x'], x):
+            fun(x)
+        return cache['value'][1]
+
+    x = least_squares(fun, np.clip(x0, lower, upper), jac=jac, bounds=(lower, upper),
+                      method='trf', max_nfev=iterations, xtol=1e-12, ftol=1e-14,
+                      gtol=1e-12).x
+    constraints = problem.inequalities()
+    if constraints:
+        x = minimize(problem.objective, x, jac=True, method='SLSQP', bounds=box,
+                     constraints=constraints,
+                     options={'maxiter': iterations, 'ftol': 1e-14}).x
+    return x

@@ -1,0 +1,51 @@
+"""
+Dense playback: a field for every small insertion step, the magnetisation held fixed.
+
+The rig inserts 1 mm at a time at about 2 Hz (thesis 5.3.3) while a plan has a few key steps.
+Between them, every ``playback_step_m`` of insertion gets its own field, fitted for that
+partial insertion with the plan's magnetisation, warm-started from the step before it as the
+rig runs it (the state carried along the insertion), starting from the field interpolated
+between the key steps. Each step is verified in the forward model and flagged if it is not a
+stable converged equilibrium.
+"""
+
+import numpy as np
+from tentacle_planner.optimise import fit, Problem
+
+
+def dense_lengths(key_steps_m, step_m):
+    """Return the inserted lengths (m) every step_m up to the last key step, key steps too."""
+    last = key_steps_m[-1]
+    dense = np.arange(1, int(np.floor(last / step_m + 1e-9)) + 1) * step_m
+    lengths = np.unique(np.round(np.concatenate([dense, key_steps_m]), 12))
+    return [float(v) for v in lengths if v > 0]
+
+
+def playback(model, plan, target, step_m, constraints, iterations=50):
+    """
+    Return (dense Steps, flags) for a plan.
+
+    :param model: the TentacleModel the plan was made with
+    :param plan: a Plan (its directions are held; its key fields start the interpolation)
+    :param target: callable (chain, inserted_m) -> (n + 1, 3) follow-the-leader target, m
+    :param step_m: insertion between dense steps, m
+    :param constraints: Constraints (field limits apply at every dense step)
+    :param iterations: Gauss-Newton budget per dense step
+    """
+    key_m = np.array([s.inserted_m for s in plan.steps])
+    key_fields = plan.fields_t
+    steps, flags, start = [], [], None
+    for inserted_m in dense_lengths(list(key_m), step_m):
+        guess = np.array([np.interp(inserted_m, key_m, key_fields[:, axis]) for axis in range(3)])
+        problem = Problem(model, [inserted_m], [target(model.chain(inserted_m), inserted_m)],
+                          constraints, directions=plan.directions, start=start)
+        x = fit(problem, problem.pack(plan.directions, [guess]), iterations)
+        solution = problem.simulate(x)[-1]
+        step = problem.plan(x).steps[0]
+        steps.append(step)
+        if not step.converged:
+            flags.append(f'dense step at {inserted_m * 1e3:.1f} mm did not converge')
+        elif not step.stability > 0:
+            flags.append(f'unstable dense step at {inserted_m * 1e3:.1f} mm')
+        start = (solution.state, inserted_m)
+    return steps, flags

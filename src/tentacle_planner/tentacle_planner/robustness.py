@@ -1,0 +1,108 @@
+"""
+How a plan fares when the real tentacle or rig is not the model: perturbed models.
+
+The thesis puts its remaining navigation error on an imprecisely placed insertion point
+and on model error. Each perturbation below is a model of the same knobs with one thing
+changed; a plan (its magnetisation and fields) is played in each, warm-started along the
+insertion, and its shape error per step reported. ``RobustProblem`` plans against all of
+them at once: its residuals stack every perturbed model's, so the fit minimises the sum of
+their squared errors, which bounds the worst one (reported beside the nominal).
+"""
+
+from dataclasses import replace
+import math
+
+import numpy as np
+from tentacle_model.model import TentacleModel
+from tentacle_planner.optimise import Problem
+
+PERTURBATIONS = (
+    ('stiffness x0.8', {'stiffness': 0.8}),
+    ('stiffness x1.2', {'stiffness': 1.2}),
+    ('remanence x0.9', {'remanence': 0.9}),
+    ('remanence x1.1', {'remanence': 1.1}),
+    ('insertion point 0.5 mm sideways', {'sideways_m': 0.5e-3}),
+    ('base direction turned 2 deg', {'turn_rad': math.radians(2.0)}),
+)
+
+
+def perturbed(spec, stiffness=1.0, remanence=1.0, sideways_m=0.0, turn_rad=0.0):
+    """
+    Return a TentacleSpec with one or more things changed.
+
+    :param stiffness: factor on every modulus (and the backbone's stiffness)
+    :param remanence: factor on every magnetisation
+    :param sideways_m: the insertion point moved along the base-plane normal, m
+    :param turn_rad: the base direction turned in the base plane (about the base z), rad
+    """
+    segments = tuple(replace(s, modulus_pa=tuple(stiffness * m for m in s.modulus_pa),
+                             magnetisation_a_per_m=remanence * s.magnetisation_a_per_m)
+                     for s in spec.segments)
+    backbone = None if spec.backbone is None else replace(
+        spec.backbone, stiffness_n_m2=stiffness * spec.backbone.stiffness_n_m2)
+    c, s = math.cos(turn_rad), math.sin(turn_rad)
+    turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return replace(spec, segments=segments, backbone=backbone,
+                   base_position_m=spec.base_position_m + sideways_m * spec.base_rotation[:, 1],
+                   base_rotation=spec.base_rotation @ turn)
+
+
+def variant(model, spec):
+    """Return a TentacleModel of the same knobs for another spec."""
+    return TentacleModel(spec, dof=model.dof, sublinks=model.sublinks,
+                         gravity_m_s2=model.gravity_m_s2, dipoles=model.dipoles,
+                         backbone_m=model.backbone_m, tol=model.tol,
+                         max_iterations=model.max_iterations)
+
+
+def perturbed_problems(problem):
+    """Return [(name, Problem)]: the nominal problem first, then each perturbation's."""
+    out = [('nominal', problem)]
+    for name, change in PERTURBATIONS:
+        model = variant(problem.model, perturbed(problem.model.spec, **change))
+        out.append((name, Problem(model, problem.steps_m, problem.targets,
+                                  problem.constraints, problem.fixed_directions,
+                                  problem.start)))
+    return out
+
+
+def report(problems, plan):
+    """
+    Return [(name, shape RMS per step (m), shape RMS over the steps (m))] of a plan.
+
+    :param problems: perturbed_problems(...)
+    """
+    rows = []
+    for name, problem in problems:
+        played = problem.plan(problem.pack(plan.directions, plan.fields_t))
+        rows.append((name, [s.shape_rms_m for s in played.steps], played.shape_rms_m))
+    return rows
+
+
+class RobustProblem:
+    """Every perturbed model's residuals at once, for one set of unknowns."""
+
+    def __init__(self, problems):
+        """Take perturbed_problems(...): the nominal first."""
+        self.named = problems
+        self.nominal = problems[0][1]
+        self.evaluations = 0
+
+    def __getattr__(self, name):
+        # The unknowns, bounds, limits and plans are the nominal problem's.
+        return getattr(self.nominal, name)
+
+    def residuals(self, x):
+        """Return the stacked residuals and Jacobians of every model."""
+        self.evaluations += 1
+        parts = [p.residuals(x) for _, p in self.named]
+        return np.concatenate([r for r, _ in parts]), np.vstack([j for _, j in parts])
+
+    def objective(self, x):
+        """Return (sum of every model's objective, its gradient)."""
+        r, jac = self.residuals(x)
+        return float(r @ r), 2 * jac.T @ r
+
+    def plan(self, x, flags=()):
+        """Return the nominal Plan at x, its objective the robust one."""
+        return replace(self.nominal.plan(x, flags), objective=self.objective(x)[0])

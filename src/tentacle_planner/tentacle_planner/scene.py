@@ -1,0 +1,367 @@
+"""
+Scene files (DESIGN.md, "Scenes and schedules"): what a plan is made for, validated.
+
+::
+
+    name: pancreatic_duct                       # optional: the file's stem
+    tentacle: ../tentacles/braided_chapter5.yaml  # relative to this file
+    path: {points_m: [[0, 0, 0], ...]}          # or {file: duct.mrk.json}; frame: rig | image
+    insertion_steps_m: [0.010, 0.020, 0.030]    # increasing, in (0, tentacle length]
+    playback_step_m: 0.001                      # optional
+    coil: {max_field_t: 0.020, max_total_field_t: 0.030, max_field_change_t: 0.015}
+    obstacles: [{centre_m: [x, y, z], radius_m: r}]   # or {walls: [{points_m: [...]}]}
+    model: {dof: 3, sublinks: 1, gravity_m_s2: [0, 0, 0], dipoles: false}
+    magnetisation: {planar: false, max_neighbour_angle_deg: 60, distal_axial: false}
+
+Required: tentacle, path, insertion_steps_m. Every other key is optional, and so is each key
+of coil, model and magnetisation: an omitted limit is no limit, an omitted switch is off, and
+the model defaults to 3-DoF joints, one link per segment, no gravity, no magnet-to-magnet
+interaction. coil limits: max_field_t each axis, max_total_field_t the magnitude |B|,
+max_field_change_t each axis between consecutive steps (all T). Obstacles and walls are in
+the rig frame. Unknown keys, missing required ones, wrong types and values out of range are
+refused naming the file and the key.
+
+The path is placed at the tentacle's base pose (paths.py) and must then be at least as long
+as the deepest insertion step, turn no more than the model's links can follow, from the clamp
+on (paths.check_followable with the longest link of the chain at the deepest step), lie in
+the base plane for a planar model (within paths.START_TOLERANCE_M) and keep out of every
+spherical obstacle. The model's size is checked as the solver would (statics.check_size).
+"""
+
+from dataclasses import dataclass
+import hashlib
+import math
+import pathlib
+
+import numpy as np
+from tentacle_model import statics
+from tentacle_model.chain import discretise
+from tentacle_model.model import TentacleModel
+from tentacle_model.tentacle_spec import load_tentacle, SpecError, TentacleSpec
+from tentacle_planner import paths
+from tentacle_planner.errors import PlanInputError
+import yaml
+
+MAX_FILE_BYTES = 64 * 1024  # as a tentacle file: PyYAML takes up to a second on this much
+TOP_KEYS = ('name', 'tentacle', 'path', 'insertion_steps_m', 'playback_step_m', 'coil',
+            'obstacles', 'model', 'magnetisation')
+REQUIRED_KEYS = ('tentacle', 'path', 'insertion_steps_m')
+COIL_KEYS = ('max_field_t', 'max_total_field_t', 'max_field_change_t')
+MODEL_KEYS = ('dof', 'sublinks', 'gravity_m_s2', 'dipoles')
+MAGNETISATION_KEYS = ('planar', 'max_neighbour_angle_deg', 'distal_axial')
+
+
+@dataclass(frozen=True)
+class CoilLimits:
+    """Field limits, T; None: no such limit."""
+
+    max_field_t: float | None = None         # each axis, every step
+    max_total_field_t: float | None = None   # |B|, every step
+    max_field_change_t: float | None = None  # each axis, between consecutive steps
+
+
+@dataclass(frozen=True, eq=False)
+class Sphere:
+    """A spherical obstacle, rig frame."""
+
+    centre_m: np.ndarray   # (3,)
+    radius_m: float
+
+
+@dataclass(frozen=True, eq=False)
+class Wall:
+    """Points on a wall the body keeps off, rig frame."""
+
+    points_m: np.ndarray   # (k, 3)
+
+
+@dataclass(frozen=True)
+class ModelSettings:
+    """What the scene's forward model includes (tentacle_model.model.TentacleModel)."""
+
+    dof: int = 3
+    sublinks: int = 1
+    gravity_m_s2: tuple = (0.0, 0.0, 0.0)
+    dipoles: bool = False
+
+
+@dataclass(frozen=True)
+class MagnetisationLimits:
+    """Constraints on the planned magnetisation; None or False: none."""
+
+    planar: bool = False                          # directions in the link's x-y plane
+    max_neighbour_angle_deg: float | None = None  # between neighbouring segments
+    distal_axial: bool = False                    # the tip segment magnetised along its axis
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """A validated scene: the tentacle, the rig-frame path and the limits of a plan."""
+
+    name: str
+    source: pathlib.Path          # the scene file
+    sha256: str                   # of the scene file's bytes, hex
+    tentacle_file: pathlib.Path
+    tentacle: TentacleSpec
+    path: paths.Path              # rig frame, from the insertion point
+    insertion_steps_m: tuple      # increasing
+    playback_step_m: float | None
+    coil: CoilLimits
+    obstacles: tuple              # Sphere
+    walls: tuple                  # Wall
+    model: ModelSettings
+    magnetisation: MagnetisationLimits
+
+    def tentacle_model(self, **options):
+        """Return a TentacleModel of the scene's tentacle and model settings (options override)."""
+        settings = {'dof': self.model.dof, 'sublinks': self.model.sublinks,
+                    'gravity_m_s2': self.model.gravity_m_s2, 'dipoles': self.model.dipoles}
+        settings.update(options)
+        return TentacleModel(self.tentacle, **settings)
+
+
+class _Reader:
+    """Typed access to a scene document that names the file and key of what it refuses."""
+
+    def __init__(self, source):
+        self.source = source
+
+    def fail(self, where, message):
+        raise PlanInputError(f'{self.source}: {where}: {message}')
+
+    def mapping(self, value, where, allowed, required=()):
+        if not isinstance(value, dict):
+            self.fail(where, f'expected a mapping, got {type(value).__name__}')
+        unknown = sorted(set(value) - set(allowed), key=repr)  # YAML keys need not be str
+        if unknown:
+            self.fail(where, f'unknown key(s) {unknown}; allowed: {sorted(allowed)}')
+        missing = [k for k in required if k not in value]
+        if missing:
+            self.fail(where, f'missing key(s) {missing}')
+        return value
+
+    def number(self, value, where, positive=True):
+        if isinstance(value, str):
+            try:  # YAML 1.1 reads 1e-3 and 1.0e5 (no dot, or no sign) as strings
+                value = float(value)
+            except ValueError:
+                self.fail(where, f'expected a number, got {value!r}')
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            self.fail(where, f'expected a number, got {value!r}')
+        value = float(value)
+        if not math.isfinite(value):
+            self.fail(where, f'{value} is not finite')
+        if positive and value <= 0:
+            self.fail(where, f'{value:g} must be positive')
+        return value
+
+    def optional_number(self, block, key, where):
+        value = block.get(key)
+        return None if value is None else self.number(value, f'{where}.{key}')
+
+    def flag(self, value, where):
+        if not isinstance(value, bool):
+            self.fail(where, f'expected true or false, got {value!r}')
+        return value
+
+    def vector(self, value, where):
+        if not isinstance(value, list) or len(value) != 3:
+            self.fail(where, f'expected [x, y, z], got {value!r}')
+        return np.array([self.number(v, f'{where}[{i}]', positive=False)
+                         for i, v in enumerate(value)])
+
+    def points(self, value, where):
+        if not isinstance(value, list) or not value:
+            self.fail(where, f'expected a non-empty list of [x, y, z], got {value!r}')
+        return np.array([self.vector(p, f'{where}[{i}]') for i, p in enumerate(value)])
+
+
+def load_scene(path):
+    """
+    Read and validate a scene file.
+
+    :param path: the scene YAML file
+    :return: a Scene
+    :raises PlanInputError: an unreadable, oversized, empty or malformed file, a key unknown,
+        missing, of the wrong type or out of range, or a tentacle or path file that is;
+        the message names the file and the key (and the point of a path)
+    """
+    source = pathlib.Path(path)
+    try:
+        with open(source, 'rb') as file:
+            data = file.read(MAX_FILE_BYTES + 1)
+    except OSError as exc:
+        raise PlanInputError(f'{source}: {exc.strerror}') from None
+    if len(data) > MAX_FILE_BYTES:
+        raise PlanInputError(f'{source}: larger than {MAX_FILE_BYTES // 1024} KiB, the limit '
+                             'for a scene file (put a long path in a file of its own)')
+    try:
+        text = data.decode('utf-8')
+    except UnicodeDecodeError as exc:
+        raise PlanInputError(f'{source}: not UTF-8 text ({exc.reason} at byte {exc.start})') \
+            from None
+    try:
+        document = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise PlanInputError(f'{source}: not valid YAML: {exc}') from None
+    except RecursionError:
+        raise PlanInputError(f'{source}: not valid YAML: nested too deeply') from None
+    if document is None:
+        raise PlanInputError(f'{source}: empty file')
+    return parse_scene(document, source, hashlib.sha256(data).hexdigest())
+
+
+def parse_scene(document, source, sha256=''):
+    """
+    Return a Scene from a parsed scene document.
+
+    :param document: the parsed YAML
+    :param source: the scene file: messages name it, relative files are relative to it
+    :param sha256: of the scene file's bytes
+    :raises PlanInputError: as load_scene
+    """
+    source = pathlib.Path(source)
+    read = _Reader(source)
+    doc = read.mapping(document, 'top level', TOP_KEYS, REQUIRED_KEYS)
+    name = doc.get('name', source.stem)
+    if not isinstance(name, str) or not name.strip():
+        read.fail('name', f'expected a non-empty string, got {name!r}')
+    tentacle_file, spec = _tentacle(read, doc['tentacle'], source)
+    model = _model(read, doc.get('model', {}))
+    steps = _steps(read, doc['insertion_steps_m'], spec)
+    playback = doc.get('playback_step_m')
+    if playback is not None:
+        playback = read.number(playback, 'playback_step_m')
+        if playback > steps[-1]:
+            read.fail('playback_step_m', f'{playback:g} m is more than the deepest insertion '
+                      f'step, {steps[-1]:g} m')
+    try:
+        chain = discretise(spec, steps[-1], model.sublinks)
+        statics.check_size(chain.size, model.dof,
+                           chain.interacting_pair_count() if model.dipoles else 0)
+    except ValueError as exc:  # ProblemTooLarge is one
+        read.fail('model.sublinks', str(exc))
+    path = paths.load_path(doc['path'], spec.base_position_m, spec.base_rotation,
+                           source.parent, source)
+    deepest = len(steps) - 1
+    if path.length_m < steps[-1] * (1 - 1e-9):
+        read.fail(f'insertion_steps_m[{deepest}]',
+                  f'{steps[-1] * 1e3:.4g} mm is more than the length of the path, '
+                  f'{path.length_m * 1e3:.4g} mm ({path.source})')
+    paths.check_followable(path, float(np.max(chain.lengths_m)), spec.base_rotation[:, 0])
+    if model.dof == 1:
+        _check_in_base_plane(path, spec)
+    coil = read.mapping(doc.get('coil', {}), 'coil', COIL_KEYS)
+    coil = CoilLimits(*(read.optional_number(coil, k, 'coil') for k in COIL_KEYS))
+    spheres, walls = _obstacles(read, doc.get('obstacles', []))
+    for index, sphere in enumerate(spheres):
+        _check_clear(read, path, sphere, index)
+    magnetisation = _magnetisation(read, doc.get('magnetisation', {}))
+    return Scene(name, source, sha256, tentacle_file, spec, path, steps, playback, coil,
+                 spheres, walls, model, magnetisation)
+
+
+def _tentacle(read, value, source):
+    if not isinstance(value, str) or not value.strip():
+        read.fail('tentacle', f'expected a tentacle file name, got {value!r}')
+    file = source.parent / value
+    try:
+        return file, load_tentacle(file)
+    except SpecError as exc:
+        read.fail('tentacle', str(exc))
+
+
+def _model(read, raw):
+    raw = read.mapping(raw, 'model', MODEL_KEYS)
+    dof = raw.get('dof', 3)
+    if isinstance(dof, bool) or dof not in (1, 3):
+        read.fail('model.dof', f'expected 1 (planar joints) or 3 (bend, bend, twist), got '
+                  f'{dof!r}')
+    sublinks = raw.get('sublinks', 1)
+    if isinstance(sublinks, bool) or not isinstance(sublinks, int) or sublinks < 1:
+        read.fail('model.sublinks', f'expected a whole number >= 1, got {sublinks!r}')
+    gravity = raw.get('gravity_m_s2', [0.0, 0.0, 0.0])
+    gravity = tuple(float(g) for g in read.vector(gravity, 'model.gravity_m_s2'))
+    dipoles = read.flag(raw.get('dipoles', False), 'model.dipoles')
+    return ModelSettings(int(dof), sublinks, gravity, dipoles)
+
+
+def _steps(read, raw, spec):
+    if not isinstance(raw, list) or not raw:
+        read.fail('insertion_steps_m', f'expected a non-empty list of inserted lengths (m), '
+                  f'got {raw!r}')
+    steps = []
+    for i, value in enumerate(raw):
+        where = f'insertion_steps_m[{i}]'
+        step = read.number(value, where)
+        if step > spec.length_m * (1 + 1e-12):
+            read.fail(where, f'{step:g} m is more than the length of the tentacle, '
+                      f'{spec.length_m:g} m')
+        if steps and step <= steps[-1]:
+            read.fail(where, f'{step:g} m does not increase on insertion_steps_m[{i - 1}] '
+                      f'({steps[-1]:g} m): steps are in insertion order')
+        steps.append(min(step, spec.length_m))
+    return tuple(steps)
+
+
+def _obstacles(read, raw):
+    """Return (spheres, walls): a list of spheres, or {walls: [{points_m: [...]}, ...]}."""
+    if isinstance(raw, dict):
+        raw = read.mapping(raw, 'obstacles', ('walls',), ('walls',))
+        if not isinstance(raw['walls'], list):
+            read.fail('obstacles.walls', f'expected a list of {{points_m: [...]}}, got '
+                      f'{raw["walls"]!r}')
+        walls = []
+        for i, wall in enumerate(raw['walls']):
+            where = f'obstacles.walls[{i}]'
+            wall = read.mapping(wall, where, ('points_m',), ('points_m',))
+            walls.append(Wall(read.points(wall['points_m'], f'{where}.points_m')))
+        return (), tuple(walls)
+    if not isinstance(raw, list):
+        read.fail('obstacles', 'expected a list of {centre_m, radius_m} or {walls: [...]}, '
+                  f'got {type(raw).__name__}')
+    spheres = []
+    for i, sphere in enumerate(raw):
+        where = f'obstacles[{i}]'
+        sphere = read.mapping(sphere, where, ('centre_m', 'radius_m'), ('centre_m', 'radius_m'))
+        spheres.append(Sphere(read.vector(sphere['centre_m'], f'{where}.centre_m'),
+                              read.number(sphere['radius_m'], f'{where}.radius_m')))
+    return tuple(spheres), ()
+
+
+def _magnetisation(read, raw):
+    raw = read.mapping(raw, 'magnetisation', MAGNETISATION_KEYS)
+    angle = read.optional_number(raw, 'max_neighbour_angle_deg', 'magnetisation')
+    if angle is not None and angle > 180:
+        read.fail('magnetisation.max_neighbour_angle_deg', f'{angle:g} degrees is more than '
+                  '180 (no limit: leave the key out)')
+    return MagnetisationLimits(read.flag(raw.get('planar', False), 'magnetisation.planar'),
+                               angle,
+                               read.flag(raw.get('distal_axial', False),
+                                         'magnetisation.distal_axial'))
+
+
+def _check_in_base_plane(path, spec):
+    """Refuse a path out of the base plane for a planar model."""
+    normal = spec.base_rotation[:, 2]
+    off = np.abs((path.points_m - spec.base_position_m) @ normal)
+    worst = int(np.argmax(off))
+    if off[worst] > paths.START_TOLERANCE_M:
+        raise PlanInputError(
+            f'{path.source}: point {worst} is {off[worst] * 1e3:.3g} mm out of the base plane: '
+            'a planar model (model.dof 1) bends in it only (within '
+            f'{paths.START_TOLERANCE_M * 1e3:g} mm); use model.dof 3')
+
+
+def _check_clear(read, path, sphere, index):
+    """Refuse a path that runs through a spherical obstacle."""
+    a, b = path.points_m[:-1], path.points_m[1:]
+    ab = b - a
+    t = np.clip(np.sum((sphere.centre_m - a) * ab, axis=1) / np.sum(ab * ab, axis=1), 0, 1)
+    gap = np.linalg.norm(a + t[:, None] * ab - sphere.centre_m, axis=1)
+    inside = np.flatnonzero(gap < sphere.radius_m)
+    if len(inside):
+        i = int(inside[0])
+        read.fail(f'obstacles[{index}]', f'the path runs through it between points {i} and '
+                  f'{i + 1} ({path.source}), {gap[i] * 1e3:.3g} mm from its centre, radius '
+                  f'{sphere.radius_m * 1e3:.3g} mm')

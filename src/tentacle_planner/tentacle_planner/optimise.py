@@ -18,7 +18,7 @@ search is a seeded multi-start; the best plan whose every step is a stable conve
 equilibrium wins. A seed reproduces a plan exactly: budgets, not clocks, end every stage.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import math
 
 import numpy as np
@@ -62,6 +62,7 @@ class Plan:
     objective: float
     evaluations: int
     flags: list = field(default_factory=list)
+    interrupted: bool = False       # Ctrl-C during the search: the best plan so far
 
     @property
     def fields_t(self):
@@ -90,9 +91,6 @@ class Problem:
         :param start: (state, inserted_m) the rig is in before the first step (default: the
             first step starts straight)
         """
-        if model.dipoles:
-            raise ValueError('planning with dipoles is not supported yet: plan without, '
-                             'then verify with them')
         self.model, self.constraints = model, constraints
         self.steps_m = [float(s) for s in steps_m]
         self.targets = [np.asarray(t, dtype=float) for t in targets_m]
@@ -176,17 +174,23 @@ class Problem:
             state, previous = solution.state, inserted_m
         return solutions
 
-    def residuals(self, x):
+    def residuals(self, x, jacobian=True):
         """
-        Return (r, J): r the scaled point residuals of every step, J = dr/dx.
+        Return (r, J): r the scaled point residuals of every step, J = dr/dx (or None).
 
         r stacks (p - t) / (L sqrt(steps n_k)) over the steps' points, so that sum r^2 is
         the objective; J comes from the equilibrium's sensitivities.
+
+        :raises ValueError: a Jacobian for magnetisation unknowns with dipoles (the moment
+            sensitivity leaves the interaction out): plan without them, verify with them
         """
         self.evaluations += 1
         directions, fields = self.unpack(x)
-        solutions = self.simulate(x)
         n_dir = len(self.free_segments) * self.angles_per_segment
+        if jacobian and n_dir and self.model.dipoles:
+            raise ValueError('planning magnetisation with dipoles is not supported: plan '
+                             'without them, then verify with them')
+        solutions = self.simulate(x)
         rows, jacobians = [], []
         for k, (solution, target, field_t) in enumerate(zip(solutions, self.targets, fields)):
             weight = 1.0 / (self.length_m * math.sqrt(len(self.steps_m) * len(target)))
@@ -196,6 +200,8 @@ class Problem:
                 jacobians.append(jac)
                 continue
             rows.append(weight * (solution.points_m - target).reshape(-1))
+            if not jacobian:
+                continue
             d_field = self.model.field_sensitivity(solution, field_t).points.reshape(-1, 3)
             d_field = d_field * (weight * MILLITESLA)
             if self.field_size == 2:
@@ -205,7 +211,7 @@ class Problem:
             if n_dir:
                 jac[:, :n_dir] = weight * self._direction_jacobian(solution, field_t, x)
             jacobians.append(jac)
-        return np.concatenate(rows), np.vstack(jacobians)
+        return np.concatenate(rows), np.vstack(jacobians) if jacobian else None
 
     def objective(self, x):
         """Return (objective, gradient (size,)) at x; the objective is dimensionless."""
@@ -312,7 +318,8 @@ class Problem:
             elif not eq.stability > 0:
                 flags.append(f'unstable step {k + 1} (stability {eq.stability:.3g})')
         flags += self.violations(directions, fields)
-        return Plan(directions, steps, float(self.objective(x)[0]), self.evaluations, flags)
+        r = self.residuals(x, jacobian=False)[0]
+        return Plan(directions, steps, float(r @ r), self.evaluations, flags)
 
     def violations(self, directions, fields, tolerance=1e-6):
         """Return what breaks a constraint, one line each (relative tolerance)."""
@@ -376,7 +383,13 @@ def optimise(problem, *, seed=0, starts=8, iterations=100, initial=None, progres
         candidates.append(np.concatenate([directions, fields]))
     best, best_key = None, None
     for index, x0 in enumerate(candidates):
-        plan = problem.plan(fit(problem, x0, iterations))
+        try:
+            plan = problem.plan(fit(problem, x0, iterations))
+        except KeyboardInterrupt:
+            # Ctrl-C keeps the best plan so far (or the start itself, if none is done).
+            fallback = best or problem.plan(np.clip(x0, *_limits(problem)))
+            return replace(fallback, interrupted=True,
+                           flags=fallback.flags + ['interrupted: the best plan so far'])
         # A plan that relies on no unstable step and breaks no limit beats any that does.
         key = (len(plan.flags), plan.objective)
         if best_key is None or key < best_key:
@@ -384,6 +397,13 @@ def optimise(problem, *, seed=0, starts=8, iterations=100, initial=None, progres
         if progress is not None:
             progress(index + 1, len(candidates), best.objective)
     return best
+
+
+def _limits(problem):
+    """Return (lower, upper) arrays of the problem's bounds (inf where none)."""
+    box = problem.bounds()
+    return (np.array([-np.inf if b[0] is None else b[0] for b in box]),
+            np.array([np.inf if b[1] is None else b[1] for b in box]))
 
 
 def fit(problem, x0, iterations=100):
@@ -397,8 +417,7 @@ def fit(problem, x0, iterations=100):
     :param iterations: model evaluations (Gauss-Newton) and SLSQP iterations: the budget
     """
     box = problem.bounds()
-    lower = np.array([-np.inf if b[0] is None else b[0] for b in box])
-    upper = np.array([np.inf if b[1] is None else b[1] for b in box])
+    lower, upper = _limits(problem)
     cache = {}
 
     def fun(x):

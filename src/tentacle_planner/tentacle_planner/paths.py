@@ -54,6 +54,7 @@ START_TOLERANCE_M = 0.5e-3   # a rig-frame path's first point from the base posi
 INITIAL_DIRECTION_M = 2e-3   # arc length over which an image path's initial direction is taken
 BEND_ANGLE_DEG = 1.0         # seen from the start, how far off the initial chord a bend begins
 MAX_TURN_DEG = 120.0         # between consecutive segments, and consecutive link-long chords
+SHAPE_SAMPLES = 15  # the fewest points along the body a shape error is taken at (DESIGN.md)
 MIN_SEGMENT_M = 1e-9         # consecutive points closer than this are one point repeated
 MAX_FILE_BYTES = 32 * 2 ** 20
 """
@@ -612,3 +613,21 @@ def targets(path, chain, inserted_m):
     arcs = np.append(starts - (total - inserted), min(inserted, path.length_m))
     arcs[0] = 0.0
     return path.at(np.clip(arcs, 0.0, path.length_m))
+
+
+def shape_error(points_m, path, inserted_m, samples=SHAPE_SAMPLES):
+    """
+    Return (shape RMS, tip error), m: the project's shape error (DESIGN.md).
+
+    The RMS of the distance between the inserted body (the polyline of its joints and tip)
+    and the path at equal arc lengths from the insertion point, at SHAPE_SAMPLES points or
+    more; and the tip's distance from the path at the inserted length.
+    """
+    points = np.asarray(points_m, dtype=float)
+    steps = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    along = np.concatenate([[0.0], np.cumsum(steps)])
+    s = np.linspace(0.0, min(inserted_m, along[-1]), max(samples, len(points)))
+    body = np.column_stack([np.interp(s, along, points[:, axis]) for axis in range(3)])
+    distances = np.linalg.norm(body - path.at(s), axis=1)
+    tip = float(np.linalg.norm(points[-1] - path.at(min(inserted_m, path.length_m))))
+    return float(np.sqrt(np.mean(distances ** 2))), tip

@@ -66,16 +66,18 @@ def perturbed_problems(problem):
     return out
 
 
-def report(problems, plan):
+def report(problems, plan, error=None):
     """
     Return [(name, shape RMS per step (m), shape RMS over the steps (m))] of a plan.
 
     :param problems: perturbed_problems(...)
+    :param error: step -> shape RMS (m); default the optimiser's (joints and tip)
     """
     rows = []
     for name, problem in problems:
         played = problem.plan(problem.pack(plan.directions, plan.fields_t))
-        rows.append((name, [s.shape_rms_m for s in played.steps], played.shape_rms_m))
+        per_step = [s.shape_rms_m if error is None else error(s) for s in played.steps]
+        rows.append((name, per_step, float(np.sqrt(np.mean(np.square(per_step))))))
     return rows
 
 
@@ -105,4 +107,5 @@ class RobustProblem:
 
     def plan(self, x, flags=()):
         """Return the nominal Plan at x, its objective the robust one."""
-        return replace(self.nominal.plan(x, flags), objective=self.objective(x)[0])
+        r = np.concatenate([p.residuals(x, jacobian=False)[0] for _, p in self.named])
+        return replace(self.nominal.plan(x, flags), objective=float(r @ r))

@@ -1,0 +1,181 @@
+"""
+Schedule files (DESIGN.md, "Scenes and schedules") and the plan's picture.
+
+``write_schedule(out_dir, result)`` writes DIR/schedule.yaml, self-contained: the planned
+tentacle (the scene's tentacle file with every magnetised segment's direction replaced by
+the planned one), the magnetisation also as angles for the magnetising tray, the path, and
+per step the insertion, field, predicted centreline, shape RMS, tip error and stability
+(every dense playback step when the scene asks for them, key steps marked), the robustness
+figures and the flags. ``plot_plan`` draws DIR/plan.png. Shape errors are the project's
+(paths.shape_error).
+"""
+
+import pathlib
+
+import numpy as np
+from tentacle_planner.paths import shape_error
+from tentacle_planner.planner import magnetisation_angles_deg
+import yaml
+
+FORMAT = 'tentacle-schedule/1'
+
+
+def _floats(array, digits=9):
+    return [[round(float(v), digits) for v in row] for row in np.asarray(array)]
+
+
+def planned_tentacle(result):
+    """Return the tentacle file's document with the planned magnetisation directions."""
+    document = yaml.safe_load(pathlib.Path(result.scene.tentacle_file).read_text())
+    for segment, direction in zip(document['segments'], result.plan.directions):
+        if segment.get('magnetisation') and np.any(direction):
+            segment['magnetisation']['direction'] = [round(float(v), 9) for v in direction]
+    return document
+
+
+def schedule_document(result):
+    """Return the schedule as a plain document (the YAML's content)."""
+    scene, plan = result.scene, result.plan
+    key = {round(s.inserted_m, 12) for s in plan.steps}
+    played = result.playback_steps or plan.steps
+    steps = []
+    for step in played:
+        rms, tip = shape_error(step.points_m, scene.path, step.inserted_m)
+        steps.append({'insertion_m': round(step.inserted_m, 9),
+                      'key': round(step.inserted_m, 12) in key,
+                      'field_t': [round(float(v), 9) for v in step.field_t],
+                      'predicted_centreline_m': _floats(step.points_m),
+                      'shape_rms_m': round(rms, 9), 'tip_error_m': round(tip, 9),
+                      'stability': float(f'{step.stability:.6g}')})
+    angles = magnetisation_angles_deg(plan.directions)
+    magnetised = [i for i, d in enumerate(plan.directions) if np.any(d)]
+
+    def robustness(rows):
+        return [{'model': name, 'shape_rms_m': round(total, 9),
+                 'per_step_m': [round(v, 9) for v in per_step]} for name, per_step, total in rows]
+    document = {
+        'format': FORMAT,
+        'scene': {'name': scene.name, 'sha256': scene.sha256},
+        'tentacle': planned_tentacle(result),
+        'magnetisation_deg': [{'segment': i + 1, 'azimuth_deg': round(float(angles[i, 0]), 3),
+                               'elevation_deg': round(float(angles[i, 1]), 3)}
+                              for i in magnetised],
+        'path_m': _floats(scene.path.points_m),
+        'steps': steps,
+        'robustness': {'nominal_plan': robustness(result.robustness)},
+        'flags': list(result.flags),
+        'interrupted': bool(result.interrupted),
+    }
+    if result.robust_plan is not None:
+        document['robustness']['robust_plan'] = robustness(result.robust_robustness)
+    if result.verification:
+        document['verification'] = [{'model': what, 'shape_rms_m': round(rms, 9)}
+                                    for what, rms in result.verification]
+    return document
+
+
+def write_schedule(out_dir, result):
+    """Write DIR/schedule.yaml and DIR/plan.png; return the schedule's path."""
+    out = pathlib.Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / 'schedule.yaml'
+    path.write_text(yaml.safe_dump(schedule_document(result), sort_keys=False))
+    plot_plan(result, out / 'plan.png')
+    return path
+
+
+def plot_plan(result, png_path):
+    """Draw the path, obstacles, the body at every key step, magnetisation and fields."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    scene, plan = result.scene, result.plan
+    rotation, origin = scene.tentacle.base_rotation, scene.tentacle.base_position_m
+
+    def plane(points):  # the base plane's coordinates, mm
+        return (np.asarray(points) - origin) @ rotation[:, :2] * 1e3
+
+    fig, (shape_ax, field_ax) = plt.subplots(1, 2, figsize=(12, 5.5))
+    path = plane(scene.path.points_m)
+    shape_ax.plot(path[:, 0], path[:, 1], 'k--', lw=1, label='path')
+    for sphere in scene.obstacles:
+        centre = plane(sphere.centre_m[None])[0]
+        shape_ax.add_patch(plt.Circle(centre, sphere.radius_m * 1e3, color='0.8'))
+    colours = plt.cm.viridis(np.linspace(0, 0.9, len(plan.steps)))
+    span = max(np.ptp(path[:, 0]), np.ptp(path[:, 1]), 1.0)
+    for step, colour in zip(plan.steps, colours):
+        body = plane(step.points_m)
+        rms, _ = shape_error(step.points_m, scene.path, step.inserted_m)
+        shape_ax.plot(body[:, 0], body[:, 1], 'o-', color=colour, ms=3,
+                      label=f'{step.inserted_m * 1e3:.0f} mm: RMS {rms * 1e3:.2f} mm')
+        b = step.field_t @ rotation[:, :2]
+        scale = 0.15 * span / max(np.max(np.abs(plan.fields_t)), 1e-12)
+        shape_ax.annotate('', body[-1] + b * scale, body[-1],
+                          arrowprops={'arrowstyle': '->', 'color': colour})
+    last = plan.steps[-1].points_m
+    chain = scene.tentacle_model(dipoles=False).chain(plan.steps[-1].inserted_m)
+    for segment in np.unique(chain.segment_index):  # at each segment's first link
+        direction = plan.directions[segment]
+        if not np.any(direction):
+            continue
+        link = int(np.argmax(chain.segment_index == segment))
+        a, b = plane(last[link:link + 2])
+        axis = (b - a) / max(np.linalg.norm(b - a), 1e-12)
+        arrow = direction[0] * axis + direction[1] * np.array([-axis[1], axis[0]])
+        mid = (a + b) / 2
+        shape_ax.annotate('', mid + arrow * 0.06 * span, mid,
+                          arrowprops={'arrowstyle': '-|>', 'color': 'crimson'})
+    shape_ax.set_aspect('equal')
+    shape_ax.set_xlabel('along the insertion direction (mm)')
+    shape_ax.set_ylabel('base-plane normal (mm)')
+    shape_ax.set_title(f'{scene.name}: body at every key step, field (arrows at the tip), '
+                       'magnetisation (red, last step)', fontsize=9)
+    shape_ax.legend(fontsize=7, loc='best')
+    played = result.playback_steps or plan.steps
+    lengths = [s.inserted_m * 1e3 for s in played]
+    fields = np.array([s.field_t for s in played]) * 1e3
+    for axis, name in enumerate('xyz'):
+        field_ax.plot(lengths, fields[:, axis], '.-', label=f'B{name}')
+    if scene.coil.max_field_t:
+        for sign in (1, -1):
+            field_ax.axhline(sign * scene.coil.max_field_t * 1e3, color='0.6', ls=':')
+    field_ax.set_xlabel('inserted length (mm)')
+    field_ax.set_ylabel('field (mT, coil frame)')
+    field_ax.set_title('field schedule' + (' (dense playback)' if result.playback_steps
+                                           else ''), fontsize=9)
+    field_ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(png_path, dpi=110)
+    plt.close(fig)
+
+
+def summary(result):
+    """Return the terminal summary: per step, magnetisation, robustness, flags."""
+    scene, plan = result.scene, result.plan
+    length = scene.tentacle.length_m
+    lines = [f'{scene.name}: {len(plan.steps)} key steps'
+             + (f', {len(result.playback_steps)} playback steps' if result.playback_steps
+                else '') + (' [INTERRUPTED: best plan so far]' if result.interrupted else ''),
+             '  step  inserted   field (mT)                 shape RMS        tip error  stability']
+    for k, step in enumerate(plan.steps):
+        rms, tip = shape_error(step.points_m, scene.path, step.inserted_m)
+        b = ' '.join(f'{v * 1e3:7.2f}' for v in step.field_t)
+        lines.append(f'  {k + 1:4d}  {step.inserted_m * 1e3:6.1f} mm  {b}   '
+                     f'{rms * 1e3:6.3f} mm {100 * rms / length:5.2f}%   {tip * 1e3:6.3f} mm  '
+                     f'{step.stability:9.3g}')
+    angles = magnetisation_angles_deg(plan.directions)
+    lines.append('  magnetisation (azimuth, elevation in the link frame, deg): ' + ', '.join(
+        f'{i + 1}: ({angles[i, 0]:.1f}, {angles[i, 1]:.1f})'
+        for i, d in enumerate(plan.directions) if np.any(d)))
+    worst = max(result.robustness, key=lambda row: row[2])
+    lines.append(f'  robustness: nominal {result.robustness[0][2] * 1e3:.3f} mm, worst '
+                 f'{worst[2] * 1e3:.3f} mm ({worst[0]})')
+    if result.robust_plan is not None:
+        robust_worst = max(result.robust_robustness, key=lambda row: row[2])
+        lines.append(f'  robust plan: nominal {result.robust_robustness[0][2] * 1e3:.3f} mm, '
+                     f'worst {robust_worst[2] * 1e3:.3f} mm ({robust_worst[0]})')
+    for what, rms in result.verification:
+        lines.append(f'  verified {what}: shape RMS {rms * 1e3:.3f} mm')
+    lines += [f'  FLAG: {flag}' for flag in result.flags] or ['  no flags']
+    return '\n'.join(lines)

@@ -1,0 +1,99 @@
+"""tentacle-plan end to end on a scene written here: schedule file, picture, exit codes."""
+
+import hashlib
+import pathlib
+
+import numpy as np
+import pytest
+from tentacle_planner import plan_cli
+from tentacle_planner.optimise import Constraints, optimise, Problem
+from tentacle_planner.paths import shape_error
+from tentacle_planner.planner import plan_scene
+from tentacle_planner.scene import load_scene
+from tentacle_planner.schedule import FORMAT, schedule_document
+import yaml
+
+ROOT = pathlib.Path(__file__).resolve().parents[3]
+BRAIDED = ROOT / 'config' / 'tentacles' / 'braided_chapter5.yaml'
+
+
+def arc_scene(tmp_path, dof=1, radius_m=0.06, **extra):
+    """Write a scene: the braided tentacle along an in-plane arc; return its path."""
+    s = np.linspace(0.0, 0.06, 61)
+    points = np.column_stack([radius_m * np.sin(s / radius_m),
+                              radius_m * (1 - np.cos(s / radius_m)), 0 * s])
+    document = {'name': 'arc', 'tentacle': str(BRAIDED),
+                'path': {'points_m': points.round(9).tolist()},
+                'insertion_steps_m': [0.03, 0.04, 0.05],
+                'coil': {'max_field_t': 0.02}, 'model': {'dof': dof, 'sublinks': 1},
+                'magnetisation': {'planar': dof == 1}, **extra}
+    path = tmp_path / 'arc.yaml'
+    path.write_text(yaml.safe_dump(document))
+    return path
+
+
+def test_a_scene_is_planned_written_and_verified(tmp_path, capsys):
+    scene_file = arc_scene(tmp_path, playback_step_m=0.005)
+    out = tmp_path / 'out'
+    code = plan_cli.main(['--scene', str(scene_file), '--out', str(out), '--starts', '3'])
+    printed = capsys.readouterr()
+    assert code == 0, printed.out + printed.err
+    schedule = yaml.safe_load((out / 'schedule.yaml').read_text())
+    assert schedule['format'] == FORMAT and schedule['flags'] == []
+    assert schedule['scene']['sha256'] == hashlib.sha256(scene_file.read_bytes()).hexdigest()
+    assert [s['insertion_m'] for s in schedule['steps']] == pytest.approx(
+        [0.005 * k for k in range(1, 11)])
+    assert [s['insertion_m'] for s in schedule['steps'] if s['key']] == pytest.approx(
+        [0.03, 0.04, 0.05])
+    scene = load_scene(scene_file)
+    for step in schedule['steps']:
+        assert max(abs(b) for b in step['field_t']) <= 0.02 + 1e-12
+        assert step['stability'] > 0
+        rms, tip = shape_error(np.array(step['predicted_centreline_m']), scene.path,
+                               step['insertion_m'])
+        assert step['shape_rms_m'] == pytest.approx(rms, abs=1e-9)
+        if step['key']:
+            assert rms < 0.05 * scene.tentacle.length_m
+    directions = [seg['magnetisation']['direction'] for seg in schedule['tentacle']['segments']
+                  if seg.get('magnetisation')]
+    assert all(np.linalg.norm(d) == pytest.approx(1.0) for d in directions)
+    assert len(schedule['magnetisation_deg']) == len(directions)
+    assert [row['model'] for row in schedule['robustness']['nominal_plan']][0] == 'nominal'
+    assert (out / 'plan.png').stat().st_size > 10_000
+    assert 'shape RMS' in printed.out and 'no flags' in printed.out
+
+
+def test_the_same_seed_writes_the_same_schedule(tmp_path):
+    scene = load_scene(arc_scene(tmp_path))
+    first = schedule_document(plan_scene(scene, seed=4, starts=2))
+    assert schedule_document(plan_scene(scene, seed=4, starts=2)) == first
+
+
+def test_bad_input_is_named_and_exits_2(tmp_path, capsys):
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('name: x\ntentacle: nowhere.yaml\npath: {points_m: [[0, 0, 0]]}\n'
+                   'insertion_steps_m: [0.01]\n')
+    assert plan_cli.main(['--scene', str(bad), '--out', str(tmp_path / 'o')]) == 2
+    assert 'bad.yaml' in capsys.readouterr().err
+    assert not (tmp_path / 'o').exists()
+
+
+def test_ctrl_c_keeps_the_best_plan_so_far(tmp_path):
+    scene = load_scene(arc_scene(tmp_path))
+    from tentacle_planner.planner import problem_of
+
+    class Interrupted(Problem):
+        calls = 0
+
+        def residuals(self, x, jacobian=True):
+            Interrupted.calls += 1
+            if Interrupted.calls == 60:  # somewhere in the second start
+                raise KeyboardInterrupt
+            return super().residuals(x, jacobian)
+
+    base = problem_of(scene)
+    problem = Interrupted(base.model, base.steps_m, base.targets, base.constraints)
+    plan = optimise(problem, seed=0, starts=4)
+    assert plan.interrupted and plan.flags[-1] == 'interrupted: the best plan so far'
+    assert len(plan.steps) == 3 and np.all(np.isfinite(plan.fields_t))
+    assert isinstance(problem.constraints, Constraints)

@@ -79,7 +79,7 @@ class Problem:
     """A plan's unknowns, objective with its gradient, and constraints."""
 
     def __init__(self, model, steps_m, targets_m, constraints=Constraints(),
-                 directions=None, start=None):
+                 directions=None, start=None, free=None):
         """
         Set up the problem.
 
@@ -90,6 +90,7 @@ class Problem:
         :param directions: (segments, 3) magnetisation directions to hold fixed (fields only)
         :param start: (state, inserted_m) the rig is in before the first step (default: the
             first step starts straight)
+        :param free: with directions: the segments whose directions are unknowns after all
         """
         self.model, self.constraints = model, constraints
         self.steps_m = [float(s) for s in steps_m]
@@ -103,8 +104,10 @@ class Problem:
                     for seg in model.spec.segments]
         self.magnetised = [i for i, m in enumerate(strength) if m > 0]
         last = len(model.spec.segments) - 1
-        fixed = set(self.magnetised) if constraints.tip_driven or directions is not None else (
+        fixed = set(self.magnetised) if constraints.tip_driven else (
             {last} & set(self.magnetised) if constraints.distal_axial else set())
+        if directions is not None:
+            fixed |= set(self.magnetised) - set(free or ())
         self.free_segments = [i for i in self.magnetised if i not in fixed]
         self.fixed_directions = None if directions is None else np.asarray(directions, float)
         self.start = start
@@ -375,6 +378,8 @@ def optimise(problem, *, seed=0, starts=8, iterations=100, initial=None, progres
     limit = problem.constraints.max_field_t or problem.constraints.max_total_field_t or 0.02
     n_dir = len(problem.free_segments) * problem.angles_per_segment
     candidates = [] if initial is None else [np.asarray(initial, dtype=float)]
+    if starts and isinstance(problem, Problem):
+        candidates.append(insertion_order_start(problem, rng, iterations))
     for _ in range(starts):
         directions = rng.uniform(-math.pi, math.pi, n_dir)
         if problem.angles_per_segment == 2:
@@ -406,6 +411,46 @@ def _limits(problem):
             np.array([np.inf if b[1] is None else b[1] for b in box]))
 
 
+def insertion_order_start(problem, rng, iterations=100, tries=4):
+    """
+    Return a start built as the rig inserts: each step fits the segments it brings in.
+
+    The tip goes in first: at every key step only the segments that enter with it and that
+    step's field are unknown, the directions found before are held and the state is carried
+    from the step before, so each stage is a small fit (a few random tries of the new
+    directions). The whole problem is then polished from the result.
+    """
+    model, c = problem.model, problem.constraints
+    directions, _ = problem.unpack(np.zeros(problem.size))
+    fields, seen, start = [], set(), None
+    field_t = np.zeros(3)
+    for inserted_m, target in zip(problem.steps_m, problem.targets):
+        chain = model.chain(inserted_m)
+        new = sorted(set(chain.segment_index.tolist()) - seen)
+        seen |= set(new)
+        best = None
+        for _ in range(tries):
+            stage = Problem(model, [inserted_m], [target], c, directions=directions,
+                            start=start, free=new)
+            guess = directions.copy()
+            for i in stage.free_segments:
+                guess[i] = _direction(rng.uniform(-math.pi, math.pi),
+                                      0.0 if stage.angles_per_segment == 1 else
+                                      rng.uniform(-0.5, 0.5))
+            x = fit(stage, stage.pack(guess, [field_t]), iterations // 2)
+            value = stage.objective(x)[0]
+            if best is None or value < best[0]:
+                best = (value, stage, x)
+            if not stage.free_segments:
+                break
+        _, stage, x = best
+        directions, stage_fields = stage.unpack(x)
+        field_t = stage_fields[0]
+        fields.append(field_t)
+        start = (stage.simulate(x)[-1].state, inserted_m)
+    return problem.pack(directions, fields)
+
+
 def fit(problem, x0, iterations=100):
     """
     Return x after Gauss-Newton from x0, then SLSQP for the limits that are not bounds.
@@ -433,7 +478,8 @@ def fit(problem, x0, iterations=100):
                       method='trf', max_nfev=iterations, xtol=1e-12, ftol=1e-14,
                       gtol=1e-12).x
     constraints = problem.inequalities()
-    if constraints:
+    # A least-squares minimum that keeps every limit is the constrained one as well.
+    if constraints and min(np.min(c['fun'](x)) for c in constraints) < 0:
         x = minimize(problem.objective, x, jac=True, method='SLSQP', bounds=box,
                      constraints=constraints,
                      options={'maxiter': iterations, 'ftol': 1e-14}).x

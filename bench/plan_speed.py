@@ -1,0 +1,130 @@
+#!/usr/bin/env python3
+"""
+Benchmark: wall time to plan a scene against the plan's quality, over the optimiser's settings.
+
+For config/scenes/pancreatic_duct.yaml (the braided 5-link 3-DoF tentacle, five key steps)
+it plans with 1 to 8 starts of the multi-start and 25 to 100 model evaluations per start,
+and prints per setting the median wall time of the key-step plan (verified in the forward
+model; the dense 1 mm playback timed on its own) against the shape error (RMS over the key
+steps, DESIGN.md's definition, % of L), with the tip-driven baseline beside it. Target: the
+key-step plan in at most 1 s. Writes bench/out/plan_speed.png (time against error).
+
+Run: .venv/bin/python bench/plan_speed.py [--quick]
+"""
+
+import argparse
+import os
+import pathlib
+import statistics
+import sys
+import time
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+SOURCES = [str(p) for p in sorted((ROOT / 'src').iterdir()) if (p / 'package.xml').exists()]
+sys.path[:0] = SOURCES
+
+import numpy as np  # noqa: E402
+from tentacle_model.statics import compile_kernels  # noqa: E402
+from tentacle_planner import paths  # noqa: E402
+from tentacle_planner.optimise import optimise  # noqa: E402
+from tentacle_planner.planner import problem_of  # noqa: E402
+from tentacle_planner.playback import playback  # noqa: E402
+from tentacle_planner.scene import load_scene  # noqa: E402
+
+SCENE = ROOT / 'config' / 'scenes' / 'pancreatic_duct.yaml'
+TARGET_S = 1.0
+
+
+def shape_rms(scene, plan):
+    """Return the plan's shape RMS over its key steps, m (DESIGN.md)."""
+    return float(np.sqrt(np.mean([paths.shape_error(s.points_m, scene.path, s.inserted_m)[0]
+                                  ** 2 for s in plan.steps])))
+
+
+def timed(scene, repeats, **options):
+    """Return (median seconds, plan) of planning the key steps."""
+    times = []
+    for _ in range(repeats):
+        problem = problem_of(scene, options.get('tip_driven', False))
+        t0 = time.perf_counter()
+        plan = optimise(problem, seed=0, starts=options['starts'],
+                        iterations=options['iterations'])
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times), plan
+
+
+def main():
+    """Measure, print the table, write the plot."""
+    parser = argparse.ArgumentParser(description=__doc__.strip().split('\n')[0])
+    parser.add_argument('--quick', action='store_true', help='fewer settings and repeats')
+    opts = parser.parse_args()
+    compile_kernels()
+    scene = load_scene(SCENE)
+    length = scene.tentacle.length_m
+    repeats = 1 if opts.quick else 3
+    settings = [(1, 25), (1, 50), (1, 100), (2, 100), (4, 100), (8, 100)]
+    if opts.quick:
+        settings = [(1, 50), (2, 100)]
+    rows = []
+    print(f'{scene.name}: {len(scene.insertion_steps_m)} key steps, '
+          f'{scene.tentacle_model().chain(length).size} links, 3-DoF; median of {repeats}')
+    print('  plan            starts  evaluations/start  time (s)  shape RMS (% of L)  flags')
+    for tip_driven in (False, True):
+        for starts, iterations in settings:
+            seconds, plan = timed(scene, repeats, starts=starts, iterations=iterations,
+                                  tip_driven=tip_driven)
+            error = shape_rms(scene, plan) / length
+            rows.append((tip_driven, starts, iterations, seconds, error))
+            name = 'tip-driven' if tip_driven else 'shape-forming'
+            print(f'  {name:14s}  {starts:6d}  {iterations:17d}  {seconds:8.3f}  '
+                  f'{100 * error:18.2f}  {len(plan.flags)}')
+    problem = problem_of(scene)
+    plan = optimise(problem, seed=0, starts=1, iterations=100)
+    t0 = time.perf_counter()
+    dense, flags = playback(problem.model, plan, lambda chain, inserted: paths.targets(
+        scene.path, chain, inserted), scene.playback_step_m, problem.constraints)
+    dense_s = time.perf_counter() - t0
+    print(f'  dense playback: {len(dense)} steps of {scene.playback_step_m * 1e3:g} mm in '
+          f'{dense_s:.2f} s ({1e3 * dense_s / len(dense):.1f} ms a step), {len(flags)} flags')
+    # The target: a plan as good as the best one found (within 10% of its error, and within
+    # 5% of L, the results target) in at most TARGET_S.
+    shaped = [r for r in rows if not r[0]]
+    good = min(r[4] for r in shaped)
+    fast = [r for r in shaped if r[3] <= TARGET_S and r[4] <= max(1.1 * good, 0) and
+            r[4] <= 0.05]
+    baseline = min(r[4] for r in rows if r[0])
+    if fast:
+        best = min(fast, key=lambda r: r[3])
+        print(f'  target: {best[3]:.3f} s (<= {TARGET_S:g} s) with {best[1]} start(s) x '
+              f'{best[2]} evaluations, shape RMS {100 * best[4]:.2f}% of L (best found '
+              f'{100 * good:.2f}%, tip-driven {100 * baseline:.2f}%): met')
+    else:
+        print(f'  target: no setting reaches the best error ({100 * good:.2f}% of L) within '
+              f'{TARGET_S:g} s: NOT MET')
+    out = ROOT / 'bench' / 'out'
+    out.mkdir(exist_ok=True)
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(6.5, 4.5))
+    for tip_driven, marker in ((False, 'o'), (True, 's')):
+        chosen = [r for r in rows if r[0] == tip_driven]
+        ax.plot([r[3] for r in chosen], [100 * r[4] for r in chosen], marker + '-',
+                label='tip-driven baseline' if tip_driven else 'shape-forming')
+        for r in chosen:
+            ax.annotate(f'{r[1]}x{r[2]}', (r[3], 100 * r[4]), fontsize=7)
+    ax.axvline(TARGET_S, color='0.6', ls=':')
+    ax.set_xscale('log')
+    ax.set_xlabel('plan time (s), key steps, verified')
+    ax.set_ylabel('shape RMS over the key steps (% of L)')
+    ax.set_title(f'{scene.name}: plan time against plan quality (starts x evaluations)',
+                 fontsize=9)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(out / 'plan_speed.png', dpi=110)
+    print(f'  wrote {out / "plan_speed.png"}')
+
+
+if __name__ == '__main__':
+    os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+    main()

@@ -30,6 +30,7 @@ import math
 import pathlib
 
 import numpy as np
+from tentacle_model.user_files import FieldReader, read_capped
 import yaml
 
 MU0 = 4e-7 * math.pi  # vacuum permeability, T m / A
@@ -90,55 +91,6 @@ class TentacleSpec:
         return sum(s.length_m for s in self.segments)
 
 
-class _Reader:
-    """Field access that names the file and the path of every value it refuses."""
-
-    def __init__(self, source):
-        self.source = source
-
-    def fail(self, where, message):
-        raise SpecError(f'{self.source}: {where}: {message}')
-
-    def mapping(self, value, where, allowed, required=()):
-        if not isinstance(value, dict):
-            self.fail(where, f'expected a mapping, got {type(value).__name__}')
-        unknown = sorted(set(value) - set(allowed), key=repr)  # YAML keys need not be str
-        if unknown:
-            self.fail(where, f'unknown key(s) {unknown}; allowed: {sorted(allowed)}')
-        missing = [k for k in required if k not in value]
-        if missing:
-            self.fail(where, f'missing key(s) {missing}')
-        return value
-
-    def number(self, value, where, positive=True, allow_zero=False):
-        if isinstance(value, str):
-            # YAML 1.1 reads 1.0e5 (no sign in the exponent) as a string: accept it.
-            try:
-                value = float(value)
-            except ValueError:
-                self.fail(where, f'expected a number, got {value!r}')
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            self.fail(where, f'expected a number, got {value!r}')
-        value = float(value)
-        if not math.isfinite(value):
-            self.fail(where, f'{value} is not finite')
-        if positive and (value < 0 or (value == 0 and not allow_zero)):
-            self.fail(where, f'{value} must be {"non-negative" if allow_zero else "positive"}')
-        return value
-
-    def vector(self, value, where, unit=True):
-        if not isinstance(value, (list, tuple)) or len(value) != 3:
-            self.fail(where, f'expected three numbers, got {value!r}')
-        vec = np.array([self.number(v, f'{where}[{i}]', positive=False)
-                        for i, v in enumerate(value)])
-        if unit:
-            norm = np.linalg.norm(vec)
-            if norm < 1e-12:
-                self.fail(where, 'zero-length direction')
-            vec = vec / norm
-        return vec
-
-
 def _segment(read, raw, where):
     raw = read.mapping(raw, where, {'length_m', 'section', 'youngs_modulus_pa',
                                     'density_kg_m3', 'magnetisation'},
@@ -176,7 +128,7 @@ def _segment(read, raw, where):
         br = read.number(mag['remanence_t'], f'{where}.magnetisation.remanence_t',
                          allow_zero=True)
         magnetisation = br / MU0 * read.vector(mag['direction'],
-                                               f'{where}.magnetisation.direction')
+                                               f'{where}.magnetisation.direction', unit=True)
     return Segment(length, area, (i_y, i_z), polar, moduli, density, magnetisation)
 
 
@@ -186,14 +138,13 @@ def parse_tentacle(document, source='<tentacle>'):
 
     :raises SpecError: naming the source and the offending field
     """
-    read = _Reader(source)
+    read = FieldReader(source, SpecError)
     doc = read.mapping(document, 'top level', {'name', 'base', 'segments', 'backbone'},
                        ('segments',))
     base = read.mapping(doc.get('base', {}), 'base', {'position_m', 'direction', 'normal'})
-    position = read.vector(base.get('position_m', [0.0, 0.0, 0.0]), 'base.position_m',
-                           unit=False)
-    direction = read.vector(base.get('direction', [1.0, 0.0, 0.0]), 'base.direction')
-    normal = read.vector(base.get('normal', [0.0, 1.0, 0.0]), 'base.normal')
+    position = read.vector(base.get('position_m', [0.0, 0.0, 0.0]), 'base.position_m')
+    direction = read.vector(base.get('direction', [1.0, 0.0, 0.0]), 'base.direction', unit=True)
+    normal = read.vector(base.get('normal', [0.0, 1.0, 0.0]), 'base.normal', unit=True)
     normal = normal - direction * float(direction @ normal)
     if np.linalg.norm(normal) < 1e-9:
         read.fail('base.normal', 'must not be parallel to base.direction')
@@ -228,14 +179,7 @@ def load_tentacle(path):
     :raises SpecError: unreadable, larger than MAX_FILE_BYTES, not UTF-8 text, not YAML, or
         a field that is missing, unknown or invalid
     """
-    try:
-        with open(path, 'rb') as file:
-            data = file.read(MAX_FILE_BYTES + 1)  # a device or a huge file: no more than that
-    except OSError as exc:
-        raise SpecError(f'{path}: {exc.strerror}') from None
-    if len(data) > MAX_FILE_BYTES:
-        raise SpecError(f'{path}: larger than {MAX_FILE_BYTES // 1024} KiB, the limit for a '
-                        'tentacle file')
+    data = read_capped(path, MAX_FILE_BYTES, SpecError, 'a tentacle file')
     try:
         text = data.decode('utf-8')
     except UnicodeDecodeError as exc:

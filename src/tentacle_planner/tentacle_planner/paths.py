@@ -48,6 +48,7 @@ import pathlib
 import re
 
 import numpy as np
+from tentacle_model.user_files import read_capped
 from tentacle_planner.errors import PlanInputError
 
 START_TOLERANCE_M = 0.5e-3   # a rig-frame path's first point from the base position, at most
@@ -337,14 +338,7 @@ def read_path_file(file):
     if reader is None:
         raise PlanInputError(f'{file}: unknown kind of path file: give a .mrk.json, .fcsv, '
                              '.csv or .npy file')
-    try:
-        with open(file, 'rb') as stream:
-            data = stream.read(MAX_FILE_BYTES + 1)
-    except OSError as exc:
-        raise PlanInputError(f'{file}: {exc.strerror}') from None
-    if len(data) > MAX_FILE_BYTES:
-        raise PlanInputError(f'{file}: larger than {MAX_FILE_BYTES // 2 ** 20} MiB, the limit '
-                             'for a path file')
+    data = read_capped(file, MAX_FILE_BYTES, PlanInputError, 'a path file')
     if not data.strip():
         raise PlanInputError(f'{file}: empty file')
     if reader is _read_npy:

@@ -30,7 +30,6 @@ spherical obstacle. The model's size is checked as the solver would (statics.che
 
 from dataclasses import dataclass
 import hashlib
-import math
 import pathlib
 
 import numpy as np
@@ -38,6 +37,7 @@ from tentacle_model import statics
 from tentacle_model.chain import discretise
 from tentacle_model.model import TentacleModel
 from tentacle_model.tentacle_spec import load_tentacle, SpecError, TentacleSpec
+from tentacle_model.user_files import FieldReader, read_capped
 from tentacle_planner import paths
 from tentacle_planner.errors import PlanInputError
 import yaml
@@ -120,62 +120,6 @@ class Scene:
         return TentacleModel(self.tentacle, **settings)
 
 
-class _Reader:
-    """Typed access to a scene document that names the file and key of what it refuses."""
-
-    def __init__(self, source):
-        self.source = source
-
-    def fail(self, where, message):
-        raise PlanInputError(f'{self.source}: {where}: {message}')
-
-    def mapping(self, value, where, allowed, required=()):
-        if not isinstance(value, dict):
-            self.fail(where, f'expected a mapping, got {type(value).__name__}')
-        unknown = sorted(set(value) - set(allowed), key=repr)  # YAML keys need not be str
-        if unknown:
-            self.fail(where, f'unknown key(s) {unknown}; allowed: {sorted(allowed)}')
-        missing = [k for k in required if k not in value]
-        if missing:
-            self.fail(where, f'missing key(s) {missing}')
-        return value
-
-    def number(self, value, where, positive=True):
-        if isinstance(value, str):
-            try:  # YAML 1.1 reads 1e-3 and 1.0e5 (no dot, or no sign) as strings
-                value = float(value)
-            except ValueError:
-                self.fail(where, f'expected a number, got {value!r}')
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            self.fail(where, f'expected a number, got {value!r}')
-        value = float(value)
-        if not math.isfinite(value):
-            self.fail(where, f'{value} is not finite')
-        if positive and value <= 0:
-            self.fail(where, f'{value:g} must be positive')
-        return value
-
-    def optional_number(self, block, key, where):
-        value = block.get(key)
-        return None if value is None else self.number(value, f'{where}.{key}')
-
-    def flag(self, value, where):
-        if not isinstance(value, bool):
-            self.fail(where, f'expected true or false, got {value!r}')
-        return value
-
-    def vector(self, value, where):
-        if not isinstance(value, list) or len(value) != 3:
-            self.fail(where, f'expected [x, y, z], got {value!r}')
-        return np.array([self.number(v, f'{where}[{i}]', positive=False)
-                         for i, v in enumerate(value)])
-
-    def points(self, value, where):
-        if not isinstance(value, list) or not value:
-            self.fail(where, f'expected a non-empty list of [x, y, z], got {value!r}')
-        return np.array([self.vector(p, f'{where}[{i}]') for i, p in enumerate(value)])
-
-
 def load_scene(path):
     """
     Read and validate a scene file.
@@ -187,14 +131,8 @@ def load_scene(path):
         the message names the file and the key (and the point of a path)
     """
     source = pathlib.Path(path)
-    try:
-        with open(source, 'rb') as file:
-            data = file.read(MAX_FILE_BYTES + 1)
-    except OSError as exc:
-        raise PlanInputError(f'{source}: {exc.strerror}') from None
-    if len(data) > MAX_FILE_BYTES:
-        raise PlanInputError(f'{source}: larger than {MAX_FILE_BYTES // 1024} KiB, the limit '
-                             'for a scene file (put a long path in a file of its own)')
+    data = read_capped(source, MAX_FILE_BYTES, PlanInputError,
+                       'a scene file (put a long path in a file of its own)')
     try:
         text = data.decode('utf-8')
     except UnicodeDecodeError as exc:
@@ -221,7 +159,7 @@ def parse_scene(document, source, sha256=''):
     :raises PlanInputError: as load_scene
     """
     source = pathlib.Path(source)
-    read = _Reader(source)
+    read = FieldReader(source, PlanInputError)
     doc = read.mapping(document, 'top level', TOP_KEYS, REQUIRED_KEYS)
     name = doc.get('name', source.stem)
     if not isinstance(name, str) or not name.strip():

@@ -146,14 +146,14 @@ def test_a_slicer_path_is_placed_at_the_insertion_pose(folder):
     (['insertion_steps_m'], [], 'insertion_steps_m: expected a non-empty list'),
     (['insertion_steps_m', 2], 'deep', r"insertion_steps_m\[2\]: expected a number, got 'deep'"),
     (['insertion_steps_m', 0], -0.01, r'insertion_steps_m\[0\]: -0.01 must be positive'),
-    (['insertion_steps_m', 0], 0, r'insertion_steps_m\[0\]: 0 must be positive'),
+    (['insertion_steps_m', 0], 0, r'insertion_steps_m\[0\]: 0.0 must be positive'),
     (['insertion_steps_m', 2], 0.020, r'insertion_steps_m\[2\]: 0.02 m does not increase on '
                                       r'insertion_steps_m\[1\] \(0.02 m\)'),
     (['insertion_steps_m', 4], 0.035, r'insertion_steps_m\[4\]: 0.035 m does not increase'),
     (['insertion_steps_m', 4], 0.051, r'insertion_steps_m\[4\]: 0.051 m is more than the '
                                       'length of the tentacle, 0.05 m'),
     (['insertion_steps_m', 1], float('nan'), r'insertion_steps_m\[1\]: nan is not finite'),
-    (['playback_step_m'], 0.0, 'playback_step_m: 0 must be positive'),
+    (['playback_step_m'], 0.0, 'playback_step_m: 0.0 must be positive'),
     (['playback_step_m'], 0.06, 'playback_step_m: 0.06 m is more than the deepest'),
     (['coil', 'max_field_t'], -0.02, 'coil.max_field_t: -0.02 must be positive'),
     (['coil', 'max_total_field_t'], True, 'coil.max_total_field_t: expected a number, got True'),
@@ -169,7 +169,7 @@ def test_a_slicer_path_is_placed_at_the_insertion_pose(folder):
     (['magnetisation', 'max_neighbour_angle_deg'], 200, 'magnetisation.max_neighbour_angle_deg: '
                                                         '200 degrees is more than 180'),
     (['obstacles'], 'none', 'obstacles: expected a list of'),
-    (['obstacles', 0, 'radius_m'], 0, r'obstacles\[0\].radius_m: 0 must be positive'),
+    (['obstacles', 0, 'radius_m'], 0, r'obstacles\[0\].radius_m: 0.0 must be positive'),
     (['obstacles', 0, 'centre_m'], [0, 0], r'obstacles\[0\].centre_m: expected \[x, y, z\]'),
     (['obstacles'], {'walls': [{'points_m': []}]}, r'obstacles.walls\[0\].points_m: expected a '
                                                    'non-empty list'),

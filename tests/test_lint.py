@@ -12,7 +12,7 @@ from ament_pep257.main import main as pep257_main
 import pytest
 from rig_support import ROOT
 
-PYTHON_TREES = ['src', 'tests', 'bench', 'scripts', 'conftest.py']
+PYTHON_TREES = ['src', 'tests', 'bench', 'scripts', 'config', 'conftest.py']
 ROS_MODULES = ('rclpy', 'geometry_msgs', 'std_msgs', 'std_srvs', 'diagnostic_msgs',
                'sensor_msgs', 'nav_msgs', 'rcl_interfaces')
 

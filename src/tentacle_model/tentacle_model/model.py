@@ -77,7 +77,7 @@ class TentacleModel:
         self.gravity_m_s2 = np.asarray(gravity_m_s2, dtype=float)
         self.dipoles, self.backbone_m = dipoles, backbone_m
         self.tol, self.max_iterations = tol, max_iterations
-        self._chains = {}
+        self._chains, self._unloaded = {}, {}
         self.chain(spec.length_m)  # a bad knob is refused now, not at the first solve
 
     def chain(self, inserted_m):
@@ -156,6 +156,25 @@ class TentacleModel:
         out[same] = state[index[same]]
         out[0] = state[0]
         return out
+
+    def stability(self, solution, field_t):
+        """
+        Return the smallest eigenvalue of the 3-DoF Hessian at a solution, N m / rad^2.
+
+        Every joint's bend_1, bend_2 and twist, whatever the model: for a planar model this
+        sees the modes out of the base plane too, which its own Hessian cannot (an in-plane
+        equilibrium can be stable in the plane and buckle out of it). > 0: stable.
+        """
+        return float(np.linalg.eigvalsh(self._evaluate(solution, field_t)[1].hessian)[0])
+
+    def unloaded_stability(self, inserted_m):
+        """Return the straight chain's stiffness alone, its smallest eigenvalue, N m / rad^2."""
+        key = round(float(inserted_m), 12)
+        if key not in self._unloaded:
+            chain = self.chain(inserted_m)
+            hessian = spatial.evaluate(chain, np.zeros((chain.size, 3)), np.zeros(3)).hessian
+            self._unloaded[key] = float(np.linalg.eigvalsh(hessian)[0])
+        return self._unloaded[key]
 
     def _free(self, n):
         """Return the indices of the model's free angles in the flattened (3n,) state."""

@@ -108,3 +108,25 @@ def test_moment_sensitivity_matches_finite_differences(braided):
             fd_points, abs=1e-4 * np.abs(fd_points).max())
     with pytest.raises(ValueError, match='dipoles'):
         TentacleModel(braided, dipoles=True).moment_sensitivity(solution, BRAIDED_FIELD)
+
+
+def test_a_planar_equilibrium_unstable_out_of_its_plane_is_seen():
+    """Straight in a field against its moment: stable in the stiff plane, not out of it."""
+    from tentacle_model.tentacle_spec import parse_tentacle
+    spec = parse_tentacle({
+        'base': {'position_m': [0, 0, 0], 'direction': [1, 0, 0], 'normal': [0, 1, 0]},
+        'segments': [{'length_m': 0.01, 'section': {'diameter_m': 0.002},
+                      'youngs_modulus_pa': {'bend_1': 4e5, 'bend_2': 1e5, 'twist': 1e5},
+                      'density_kg_m3': 1000.0,
+                      'magnetisation': {'remanence_t': 0.1, 'direction': [1, 0, 0]}}]})
+    planar = TentacleModel(spec, dof=1)
+    k_in, k_out, k_twist = planar.chain(0.01).stiffness_n_m[0]
+    moment = float(np.linalg.norm(planar.chain(0.01).moments_a_m2[0]))
+    field = 2.5 * k_out / moment          # |m| B between the two bending stiffnesses
+    solution = planar.solve(0.01, [-field, 0.0, 0.0])
+    # Energy -m.B = |m| B cos(bend): each bend's curvature is its stiffness less |m| B.
+    assert solution.equilibrium.stability == pytest.approx(k_in - moment * field, rel=1e-6)
+    assert planar.stability(solution, [-field, 0, 0]) == pytest.approx(
+        min(k_out - moment * field, k_twist), rel=1e-6)
+    assert planar.stability(solution, [-field, 0, 0]) < 0 < solution.equilibrium.stability
+    assert planar.unloaded_stability(0.01) == pytest.approx(min(k_in, k_out, k_twist))

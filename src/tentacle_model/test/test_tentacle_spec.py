@@ -37,6 +37,7 @@ def test_cantilever_file_has_the_issue_numbers(cantilever):
     assert ei == pytest.approx(1.0e5 * math.pi * 0.002 ** 4 / 64, rel=1e-9, abs=0)
     assert ma == pytest.approx(0.107 / MU0 * math.pi * 0.001 ** 2, rel=1e-9, abs=0)
     np.testing.assert_allclose(spec.base_rotation, np.eye(3))
+    assert spec.segments[0].radius_m == 0.001
 
 
 def test_rectangular_section_and_anisotropic_moduli():
@@ -48,6 +49,7 @@ def test_rectangular_section_and_anisotropic_moduli():
     assert out_of_plane == pytest.approx(5e5 * 0.004 * 0.001 ** 3 / 12, rel=1e-9, abs=0)
     polar = (0.001 * 0.004 ** 3 + 0.004 * 0.001 ** 3) / 12
     assert twist == pytest.approx(1e7 * polar, rel=1e-9, abs=0)
+    assert segment.radius_m == pytest.approx(math.hypot(0.004, 0.001) / 2)  # the corner
 
 
 @pytest.mark.parametrize('path, value, message', [

@@ -25,6 +25,11 @@ import numpy as np
 from scipy.optimize import least_squares, minimize
 
 MILLITESLA = 1e-3  # field unknowns are in mT: of the order of the angles, for the optimiser
+MIN_STABILITY_MARGIN = 0.1
+"""The stability margin under which the objective adds a penalty: the smallest 3-DoF Hessian
+eigenvalue at a step over that of the straight, unloaded body (its stiffness alone)."""
+STABILITY_WEIGHT = 0.1  # the penalty at zero margin: as much as a shape error of 10% of L
+MARGIN_STEP = 1e-4      # forward-difference step of the margin's derivative (rad, mT)
 
 
 @dataclass(frozen=True)
@@ -49,7 +54,7 @@ class Step:
     points_m: np.ndarray           # (n + 1, 3) predicted joints and tip
     shape_rms_m: float
     tip_error_m: float
-    stability: float               # smallest Hessian eigenvalue (> 0: stable)
+    stability: float               # smallest 3-DoF Hessian eigenvalue, N m/rad^2 (> 0: stable)
     converged: bool
 
 
@@ -79,7 +84,7 @@ class Problem:
     """A plan's unknowns, objective with its gradient, and constraints."""
 
     def __init__(self, model, steps_m, targets_m, constraints=Constraints(),
-                 directions=None, start=None, free=None):
+                 directions=None, start=None, free=None, min_margin=MIN_STABILITY_MARGIN):
         """
         Set up the problem.
 
@@ -91,6 +96,7 @@ class Problem:
         :param start: (state, inserted_m) the rig is in before the first step (default: the
             first step starts straight)
         :param free: with directions: the segments whose directions are unknowns after all
+        :param min_margin: the stability margin under which a step is penalised (0: never)
         """
         self.model, self.constraints = model, constraints
         self.steps_m = [float(s) for s in steps_m]
@@ -110,7 +116,7 @@ class Problem:
             fixed |= set(self.magnetised) - set(free or ())
         self.free_segments = [i for i in self.magnetised if i not in fixed]
         self.fixed_directions = None if directions is None else np.asarray(directions, float)
-        self.start = start
+        self.start, self.min_margin = start, min_margin
         self.angles_per_segment = 1 if constraints.planar_magnetisation else 2
         self.field_size = 2 if model.dof == 1 else 3
         self.base_plane = model.spec.base_rotation[:, :2]
@@ -179,10 +185,11 @@ class Problem:
 
     def residuals(self, x, jacobian=True):
         """
-        Return (r, J): r the scaled point residuals of every step, J = dr/dx (or None).
+        Return (r, J): r the scaled residuals of every step, J = dr/dx (or None).
 
-        r stacks (p - t) / (L sqrt(steps n_k)) over the steps' points, so that sum r^2 is
-        the objective; J comes from the equilibrium's sensitivities.
+        r stacks, per step, (p - t) / (L sqrt(steps n_k)) over its points and its stability
+        penalty (_stability_penalty), so that sum r^2 is the objective; J comes from the
+        equilibrium's sensitivities.
 
         :raises ValueError: a Jacobian for magnetisation unknowns with dipoles (the moment
             sensitivity leaves the interaction out): plan without them, verify with them
@@ -197,24 +204,64 @@ class Problem:
         rows, jacobians = [], []
         for k, (solution, target, field_t) in enumerate(zip(solutions, self.targets, fields)):
             weight = 1.0 / (self.length_m * math.sqrt(len(self.steps_m) * len(target)))
-            jac = np.zeros((target.size, self.size))
+            jac = np.zeros((target.size + 1, self.size))
             if not solution.equilibrium.converged or not np.all(np.isfinite(solution.points_m)):
-                rows.append(np.full(target.size, 10.0))  # outside what the rig can rely on
+                rows.append(np.full(target.size + 1, 10.0))  # outside what the rig can rely on
                 jacobians.append(jac)
                 continue
-            rows.append(weight * (solution.points_m - target).reshape(-1))
+            penalty, d_penalty = self._stability_penalty(k, solution, x, jacobian)
+            rows.append(np.append(weight * (solution.points_m - target).reshape(-1), penalty))
             if not jacobian:
                 continue
+            jac[-1] = d_penalty
             d_field = self.model.field_sensitivity(solution, field_t).points.reshape(-1, 3)
             d_field = d_field * (weight * MILLITESLA)
             if self.field_size == 2:
                 d_field = d_field @ self.base_plane
             start = n_dir + k * self.field_size
-            jac[:, start:start + self.field_size] = d_field
+            jac[:-1, start:start + self.field_size] = d_field
             if n_dir:
-                jac[:, :n_dir] = weight * self._direction_jacobian(solution, field_t, x)
+                jac[:-1, :n_dir] = weight * self._direction_jacobian(solution, field_t, x)
             jacobians.append(jac)
         return np.concatenate(rows), np.vstack(jacobians) if jacobian else None
+
+    def margin(self, solution, field_t):
+        """Return a step's stability margin: its 3-DoF stability over the unloaded body's."""
+        stability = solution.equilibrium.stability if self.model.dof == 3 else \
+            self.model.stability(solution, field_t)
+        return stability / self.model.unloaded_stability(solution.inserted_m)
+
+    def _stability_penalty(self, k, solution, x, jacobian):
+        """
+        Return (penalty, d penalty / dx) of step k: STABILITY_WEIGHT (1 - margin / min_margin).
+
+        Zero at margins of min_margin and more. The derivative is a forward difference of the
+        margin, each unknown of the step (its field, the directions) moved in turn and the
+        step re-solved from its equilibrium: only where the penalty applies.
+        """
+        d_penalty = np.zeros(self.size)
+        if not self.min_margin:
+            return 0.0, d_penalty
+        inserted_m = solution.inserted_m
+        field_t = self.unpack(x)[1][k]
+        margin = self.margin(solution, field_t)
+        if margin >= self.min_margin:
+            return 0.0, d_penalty
+        penalty = STABILITY_WEIGHT * (1.0 - margin / self.min_margin)
+        if not jacobian:
+            return penalty, d_penalty
+        n_dir = len(self.free_segments) * self.angles_per_segment
+        own = range(n_dir + k * self.field_size, n_dir + (k + 1) * self.field_size)
+        for j in [*range(n_dir), *own]:
+            moved = x.copy()
+            moved[j] += MARGIN_STEP
+            directions, fields = self.unpack(moved)
+            other = self.model.solve(inserted_m, fields[k], solution.state,
+                                     self._moments(directions, inserted_m))
+            if other.equilibrium.converged:
+                d_margin = (self.margin(other, fields[k]) - margin) / MARGIN_STEP
+                d_penalty[j] = -STABILITY_WEIGHT / self.min_margin * d_margin
+        return penalty, d_penalty
 
     def objective(self, x):
         """Return (objective, gradient (size,)) at x; the objective is dimensionless."""
@@ -313,13 +360,18 @@ class Problem:
                                                             fields)):
             eq = solution.equilibrium
             distances = np.linalg.norm(solution.points_m - target, axis=1)
+            # A planar model's own Hessian cannot see the modes out of its plane.
+            stability = float(eq.stability) if self.model.dof == 3 or not eq.converged \
+                else self.model.stability(solution, field_t)
             steps.append(Step(solution.inserted_m, field_t, solution.points_m,
                               float(np.sqrt(np.mean(distances ** 2))), float(distances[-1]),
-                              float(eq.stability), eq.converged))
+                              stability, eq.converged))
             if not eq.converged:
                 flags.append(f'step {k + 1} did not converge: {eq.reason}')
-            elif not eq.stability > 0:
-                flags.append(f'unstable step {k + 1} (stability {eq.stability:.3g})')
+            elif not stability > 0:
+                plane = ', out of the base plane' if self.model.dof == 1 and \
+                    eq.stability > 0 else ''
+                flags.append(f'unstable step {k + 1} (stability {stability:.3g}{plane})')
         flags += self.violations(directions, fields)
         r = self.residuals(x, jacobian=False)[0]
         return Plan(directions, steps, float(r @ r), self.evaluations, flags)

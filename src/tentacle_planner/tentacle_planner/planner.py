@@ -12,10 +12,15 @@ from dataclasses import dataclass, field
 import math
 
 import numpy as np
+from tentacle_model import statics
+from tentacle_model.chain import discretise
 from tentacle_planner import paths
+from tentacle_planner.clearance import clearance
 from tentacle_planner.optimise import Constraints, optimise, Plan, Problem
 from tentacle_planner.playback import playback
 from tentacle_planner.robustness import perturbed_problems, report, RobustProblem
+
+HIGHER_FIDELITY_SUBLINKS = 4  # sub-links per planning link in the re-check
 
 
 @dataclass(frozen=True)
@@ -29,7 +34,7 @@ class SceneResult:
     playback_steps: list            # dense Steps, or [] without playback_step_m
     robustness: list                # [(perturbation, per-step RMS, RMS)] of the nominal plan
     robust_robustness: list         # the same for the robust plan, or []
-    verification: list              # [(what, RMS)] in the scene's full model, if it differs
+    verification: list              # [(what, RMS)]: the plan re-checked in fuller models
     flags: list = field(default_factory=list)
     interrupted: bool = False
 
@@ -51,6 +56,75 @@ def problem_of(scene, tip_driven=False):
     steps = list(scene.insertion_steps_m)
     targets = [paths.targets(scene.path, model.chain(s), s) for s in steps]
     return Problem(model, steps, targets, constraints_of(scene, tip_driven))
+
+
+def shape_rms(scene, steps):
+    """Return the shape error over steps, m: DESIGN.md's (paths.shape_error), RMS."""
+    return float(np.sqrt(np.mean([paths.shape_error(step.points_m, scene.path,
+                                                    step.inserted_m)[0] ** 2
+                                  for step in steps])))
+
+
+def step_clearance(scene, step):
+    """Return (gap, what): how far a Step's body keeps off the scene's obstacles, m."""
+    chain = scene.tentacle_model(dipoles=False).chain(step.inserted_m)
+    radii = [scene.tentacle.segments[i].radius_m for i in chain.segment_index]
+    return clearance(step.points_m, radii, scene.obstacles, scene.walls)
+
+
+def contact_flags(scene, steps):
+    """Return a flag for every step whose body touches an obstacle or wall."""
+    flags = []
+    for step in steps:
+        gap, what = step_clearance(scene, step)
+        if gap <= 0:
+            flags.append(f'the body touches {what} at {step.inserted_m * 1e3:.1f} mm inserted '
+                         f'({-gap * 1e3:.2f} mm into it)')
+    return flags
+
+
+def fuller_models(scene):
+    """
+    Return [(what, model options)]: the models a plan is re-checked in.
+
+    The scene's own model when planning left a term out (magnet-to-magnet interaction is
+    planned without), and always a higher-fidelity one: HIGHER_FIDELITY_SUBLINKS times the
+    sub-links, 3-DoF joints (twist and out-of-plane bending), the scene's gravity and the
+    interaction, as large as the solver's size limits allow.
+    """
+    out = [('the scene model with magnet-to-magnet interaction', {})] if scene.model.dipoles \
+        else []
+    for sublinks in range(scene.model.sublinks * HIGHER_FIDELITY_SUBLINKS,
+                          scene.model.sublinks, -1):
+        chain = discretise(scene.tentacle, scene.insertion_steps_m[-1], sublinks)
+        try:
+            statics.check_size(chain.size, 3, chain.interacting_pair_count())
+        except statics.ProblemTooLarge:
+            continue
+        out.append((f'higher fidelity: {sublinks} sub-links per segment, 3-DoF joints, '
+                    'magnet-to-magnet interaction', {'sublinks': sublinks, 'dof': 3,
+                                                     'dipoles': True}))
+        break
+    return out
+
+
+def recheck(scene, plan):
+    """
+    Return ([(what, shape RMS m)], flags): the plan's key steps played in fuller_models.
+
+    The same magnetisation and fields, warm-started along the insertion as the rig runs
+    them; the shape error is the project's (paths.shape_error) over the key steps.
+    """
+    rows, flags = [], []
+    for what, options in fuller_models(scene):
+        model = scene.tentacle_model(**options)
+        steps = [step.inserted_m for step in plan.steps]
+        targets = [paths.targets(scene.path, model.chain(s), s) for s in steps]
+        problem = Problem(model, steps, targets)
+        played = problem.plan(problem.pack(plan.directions, plan.fields_t))
+        rows.append((what, shape_rms(scene, played.steps)))
+        flags += [f'{flag} ({what.split(":")[0]})' for flag in played.flags]
+    return rows, flags
 
 
 def plan_scene(scene, *, seed=0, starts=8, iterations=100, tip_driven=False, robust=False,
@@ -87,22 +161,18 @@ def plan_scene(scene, *, seed=0, starts=8, iterations=100, tip_driven=False, rob
         interrupted = robust_plan.interrupted
         robust_rows = report(problems, robust_plan, error)
     plan = robust_plan or nominal
-    flags = list(plan.flags)
+    flags = list(plan.flags) + contact_flags(scene, plan.steps)
     dense = []
     if scene.playback_step_m and not interrupted:
         dense, dense_flags = playback(
             problem.model, plan, lambda chain, inserted: paths.targets(scene.path, chain,
                                                                        inserted),
             scene.playback_step_m, problem.constraints)
-        flags += dense_flags
-    verification = []
-    if scene.model.dipoles:
-        full = Problem(scene.tentacle_model(), problem.steps_m, problem.targets,
-                       problem.constraints)
-        played = full.plan(full.pack(plan.directions, plan.fields_t))
-        verification.append(('with magnet-to-magnet interaction', float(np.sqrt(np.mean(
-            [error(step) ** 2 for step in played.steps])))))
-        flags += [f'{f} (with magnet-to-magnet interaction)' for f in played.flags]
+        key = {round(s.inserted_m, 12) for s in plan.steps}
+        flags += dense_flags + contact_flags(
+            scene, [s for s in dense if round(s.inserted_m, 12) not in key])
+    verification, recheck_flags = recheck(scene, plan)
+    flags += recheck_flags
     return SceneResult(scene, plan, nominal, robust_plan, dense,
                        report(problems, nominal, error),
                        robust_rows, verification, flags, interrupted)

@@ -14,7 +14,7 @@ import pathlib
 
 import numpy as np
 from tentacle_planner.paths import shape_error
-from tentacle_planner.planner import magnetisation_angles_deg
+from tentacle_planner.planner import magnetisation_angles_deg, shape_rms, step_clearance
 import yaml
 
 FORMAT = 'tentacle-schedule/1'
@@ -47,6 +47,8 @@ def schedule_document(result):
                       'predicted_centreline_m': _floats(step.points_m),
                       'shape_rms_m': round(rms, 9), 'tip_error_m': round(tip, 9),
                       'stability': float(f'{step.stability:.6g}')})
+        if scene.obstacles or scene.walls:
+            steps[-1]['clearance_m'] = round(step_clearance(scene, step)[0], 9)
     angles = magnetisation_angles_deg(plan.directions)
     magnetised = [i for i, d in enumerate(plan.directions) if np.any(d)]
 
@@ -69,7 +71,9 @@ def schedule_document(result):
     if result.robust_plan is not None:
         document['robustness']['robust_plan'] = robustness(result.robust_robustness)
     if result.verification:
-        document['verification'] = [{'model': what, 'shape_rms_m': round(rms, 9)}
+        planned = shape_rms(scene, plan.steps)
+        document['verification'] = [{'model': what, 'shape_rms_m': round(rms, 9),
+                                     'change_m': round(rms - planned, 9)}
                                     for what, rms in result.verification]
     return document
 
@@ -157,13 +161,16 @@ def summary(result):
     lines = [f'{scene.name}: {len(plan.steps)} key steps'
              + (f', {len(result.playback_steps)} playback steps' if result.playback_steps
                 else '') + (' [INTERRUPTED: best plan so far]' if result.interrupted else ''),
-             '  step  inserted   field (mT)                 shape RMS        tip error  stability']
+             '  step  inserted   field (mT)                 shape RMS        tip error  stability'
+             + ('  clearance' if scene.obstacles or scene.walls else '')]
     for k, step in enumerate(plan.steps):
         rms, tip = shape_error(step.points_m, scene.path, step.inserted_m)
         b = ' '.join(f'{v * 1e3:7.2f}' for v in step.field_t)
+        gap = (f'  {step_clearance(scene, step)[0] * 1e3:6.2f} mm' if scene.obstacles
+               or scene.walls else '')
         lines.append(f'  {k + 1:4d}  {step.inserted_m * 1e3:6.1f} mm  {b}   '
                      f'{rms * 1e3:6.3f} mm {100 * rms / length:5.2f}%   {tip * 1e3:6.3f} mm  '
-                     f'{step.stability:9.3g}')
+                     f'{step.stability:9.3g}{gap}')
     angles = magnetisation_angles_deg(plan.directions)
     lines.append('  magnetisation (azimuth, elevation in the link frame, deg): ' + ', '.join(
         f'{i + 1}: ({angles[i, 0]:.1f}, {angles[i, 1]:.1f})'
@@ -175,7 +182,9 @@ def summary(result):
         robust_worst = max(result.robust_robustness, key=lambda row: row[2])
         lines.append(f'  robust plan: nominal {result.robust_robustness[0][2] * 1e3:.3f} mm, '
                      f'worst {robust_worst[2] * 1e3:.3f} mm ({robust_worst[0]})')
+    planned = shape_rms(scene, plan.steps)
     for what, rms in result.verification:
-        lines.append(f'  verified {what}: shape RMS {rms * 1e3:.3f} mm')
+        lines.append(f'  re-checked in {what}: shape RMS {rms * 1e3:.3f} mm '
+                     f'({(rms - planned) * 1e3:+.3f} mm on the planning model)')
     lines += [f'  FLAG: {flag}' for flag in result.flags] or ['  no flags']
     return '\n'.join(lines)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from tentacle_model.model import TentacleModel
 from tentacle_model.tentacle_spec import load_tentacle
-from tentacle_planner.optimise import Constraints, optimise, Problem
+from tentacle_planner.optimise import Constraints, optimise, Problem, STABILITY_WEIGHT
 
 ROOT = pathlib.Path(__file__).resolve().parents[3]
 STEPS_M = (0.02, 0.03, 0.04, 0.05)
@@ -43,6 +43,25 @@ def test_the_gradient_is_exact(braided, dof):
     fd = np.array([(problem.objective(x + e)[0] - problem.objective(x - e)[0]) / (2 * h)
                    for e in np.eye(problem.size) * h])
     assert gradient == pytest.approx(fd, abs=1e-6 * np.abs(fd).max())
+
+
+@pytest.mark.parametrize('dof', [1, 3])
+def test_the_stability_penalty_and_its_gradient(braided, dof):
+    constraints = Constraints(planar_magnetisation=dof == 1)
+    model, x, targets = known_plan(braided, dof, constraints)
+    plain = Problem(model, STEPS_M, targets, constraints, min_margin=0)
+    # Above every step's margin the penalty applies: STABILITY_WEIGHT (1 - margin / limit).
+    strict = Problem(model, STEPS_M, targets, constraints, min_margin=50.0)
+    assert plain.objective(x)[0] == pytest.approx(0.0, abs=1e-18)
+    margins = [strict.margin(s, b) for s, b in zip(strict.simulate(x), strict.unpack(x)[1])]
+    assert all(0 < m < 50 for m in margins)
+    expected = sum((STABILITY_WEIGHT * (1 - m / 50.0)) ** 2 for m in margins)
+    value, gradient = strict.objective(x)
+    assert value == pytest.approx(expected, rel=1e-9)
+    h = 1e-4
+    fd = np.array([(strict.objective(x + e)[0] - strict.objective(x - e)[0]) / (2 * h)
+                   for e in np.eye(strict.size) * h])
+    assert gradient == pytest.approx(fd, abs=2e-3 * np.abs(fd).max())
 
 
 def test_a_reachable_plan_is_found_exactly_and_reproduced_by_its_seed(braided):

@@ -1,0 +1,41 @@
+"""
+How far a predicted body keeps off the scene's obstacles and walls (rig frame, m).
+
+The body is its links, each a capsule of its segment's section radius around the chord from
+joint to joint; a spherical obstacle is its ball, a wall its points. The gap is surface to
+surface: negative where the body would run into the obstacle.
+"""
+
+import numpy as np
+
+
+def _distances(points_m, starts_m, ends_m):
+    """Return (k, n): the distance of each of k points from each of n segments, m."""
+    ab = ends_m - starts_m                                        # (n, 3)
+    ap = points_m[:, None, :] - starts_m[None, :, :]              # (k, n, 3)
+    length2 = np.maximum(np.sum(ab * ab, axis=1), 1e-30)
+    t = np.clip(np.einsum('knc,nc->kn', ap, ab) / length2, 0.0, 1.0)
+    return np.linalg.norm(ap - t[..., None] * ab[None], axis=2)
+
+
+def clearance(points_m, link_radii_m, spheres=(), walls=()):
+    """
+    Return (gap, what): the smallest surface-to-surface gap of the body, m, and what it is to.
+
+    :param points_m: (n + 1, 3) the body's joints and tip
+    :param link_radii_m: (n,) each link's section radius, m
+    :param spheres: scene.Sphere obstacles
+    :param walls: scene.Wall point sets
+    :return: (inf, None) without obstacles; what is 'obstacle i' or 'wall i', from 1
+    """
+    points = np.asarray(points_m, dtype=float)
+    radii = np.asarray(link_radii_m, dtype=float)
+    a, b = points[:-1], points[1:]
+    best = (float('inf'), None)
+    for i, sphere in enumerate(spheres):
+        gaps = _distances(sphere.centre_m[None], a, b)[0] - radii - sphere.radius_m
+        best = min(best, (float(np.min(gaps)), f'obstacle {i + 1}'), key=lambda g: g[0])
+    for i, wall in enumerate(walls):
+        gaps = _distances(wall.points_m, a, b) - radii[None]
+        best = min(best, (float(np.min(gaps)), f'wall {i + 1}'), key=lambda g: g[0])
+    return best

@@ -29,6 +29,7 @@ MIN_STABILITY_MARGIN = 0.1
 """The stability margin under which the objective adds a penalty: the smallest 3-DoF Hessian
 eigenvalue at a step over that of the straight, unloaded body (its stiffness alone)."""
 STABILITY_WEIGHT = 0.1  # the penalty at zero margin: as much as a shape error of 10% of L
+STAGE_GOOD = 1e-6       # a stage of the insertion-order start this close needs no more tries
 MARGIN_STEP = 1e-4      # forward-difference step of the margin's derivative (rad, mT)
 
 
@@ -209,7 +210,7 @@ class Problem:
                 rows.append(np.full(target.size + 1, 10.0))  # outside what the rig can rely on
                 jacobians.append(jac)
                 continue
-            penalty, d_penalty = self._stability_penalty(k, solution, x, jacobian)
+            penalty, d_penalty = self._stability_penalty(k, solution, field_t, x, jacobian)
             rows.append(np.append(weight * (solution.points_m - target).reshape(-1), penalty))
             if not jacobian:
                 continue
@@ -231,7 +232,7 @@ class Problem:
             self.model.stability(solution, field_t)
         return stability / self.model.unloaded_stability(solution.inserted_m)
 
-    def _stability_penalty(self, k, solution, x, jacobian):
+    def _stability_penalty(self, k, solution, field_t, x, jacobian):
         """
         Return (penalty, d penalty / dx) of step k: STABILITY_WEIGHT (1 - margin / min_margin).
 
@@ -243,7 +244,6 @@ class Problem:
         if not self.min_margin:
             return 0.0, d_penalty
         inserted_m = solution.inserted_m
-        field_t = self.unpack(x)[1][k]
         margin = self.margin(solution, field_t)
         if margin >= self.min_margin:
             return 0.0, d_penalty
@@ -330,8 +330,9 @@ class Problem:
                 rows = -2 * b[:, :, None] * to_world.reshape(steps, 3, -1)
                 return rows.sum(axis=1) / MILLITESLA ** 2
             out.append({'type': 'ineq', 'fun': total, 'jac': total_jac})
+        free = set(self.free_segments)  # pairs of held directions are no constraint
         pairs = [(a, b) for a, b in zip(self.magnetised, self.magnetised[1:])
-                 if a + 1 == b]
+                 if a + 1 == b and {a, b} & free]
         if c.max_neighbour_angle_rad is not None and pairs:
             cos_limit = math.cos(c.max_neighbour_angle_rad)
 
@@ -470,9 +471,14 @@ def insertion_order_start(problem, rng, iterations=100, tries=4):
     The tip goes in first: at every key step only the segments that enter with it and that
     step's field are unknown, the directions found before are held and the state is carried
     from the step before, so each stage is a small fit (a few random tries of the new
-    directions). The whole problem is then polished from the result.
+    directions, fewer once one fits within STAGE_GOOD). The whole problem is then polished
+    from the result.
     """
     model, c = problem.model, problem.constraints
+    # Stages keep the per-axis field bounds only: the whole problem's fit, which polishes
+    # the start, applies every other limit (a stage's SLSQP took most of the time).
+    bounds_only = replace(c, max_total_field_t=None, max_field_change_t=None,
+                          max_neighbour_angle_rad=None)
     directions, _ = problem.unpack(np.zeros(problem.size))
     fields, seen, start = [], set(), None
     field_t = np.zeros(3)
@@ -482,7 +488,7 @@ def insertion_order_start(problem, rng, iterations=100, tries=4):
         seen |= set(new)
         best = None
         for _ in range(tries):
-            stage = Problem(model, [inserted_m], [target], c, directions=directions,
+            stage = Problem(model, [inserted_m], [target], bounds_only, directions=directions,
                             start=start, free=new)
             guess = directions.copy()
             for i in stage.free_segments:
@@ -493,7 +499,7 @@ def insertion_order_start(problem, rng, iterations=100, tries=4):
             value = stage.objective(x)[0]
             if best is None or value < best[0]:
                 best = (value, stage, x)
-            if not stage.free_segments:
+            if not stage.free_segments or value < STAGE_GOOD:
                 break
         _, stage, x = best
         directions, stage_fields = stage.unpack(x)

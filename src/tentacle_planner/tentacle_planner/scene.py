@@ -28,6 +28,7 @@ the base plane for a planar model (within paths.START_TOLERANCE_M) and keep out 
 spherical obstacle. The model's size is checked as the solver would (statics.check_size).
 """
 
+import dataclasses
 from dataclasses import dataclass
 import hashlib
 import pathlib
@@ -147,6 +148,46 @@ def load_scene(path):
     if document is None:
         raise PlanInputError(f'{source}: empty file')
     return parse_scene(document, source, hashlib.sha256(data).hexdigest())
+
+
+def scene_of(tentacle, path, insertion_steps_m=None, *, frame=None, **keys):
+    """
+    Return a Scene from a tentacle file and a path file, without a scene file.
+
+    The Python API behind ``tentacle-plan --tentacle FILE --path FILE``: every other scene
+    key (coil, model, magnetisation, obstacles, playback_step_m, name) is a keyword with the
+    scene file's meaning and the same checks.
+
+    :param tentacle: the tentacle file
+    :param path: the path file (.csv, .npy, .mrk.json, .fcsv)
+    :param insertion_steps_m: the key steps; default: the end of every segment the path
+        is long enough for
+    :param frame: the path's frame, 'rig' or 'image' (default: the file's own)
+    :raises PlanInputError: as load_scene, naming the file or the key
+    """
+    tentacle, path = pathlib.Path(tentacle).resolve(), pathlib.Path(path).resolve()
+    source = pathlib.Path.cwd() / '(command line)'
+    block = {'file': str(path)} if frame is None else {'file': str(path), 'frame': frame}
+    if insertion_steps_m is None:
+        try:
+            spec = load_tentacle(tentacle)
+        except SpecError as exc:
+            raise PlanInputError(str(exc)) from None
+        placed = paths.load_path(block, spec.base_position_m, spec.base_rotation,
+                                 source.parent, source)
+        ends = np.cumsum([segment.length_m for segment in spec.segments])
+        insertion_steps_m = [float(e) for e in ends if e <= placed.length_m * (1 + 1e-9)]
+        if not insertion_steps_m:
+            raise PlanInputError(f'{path}: the path, {placed.length_m * 1e3:.4g} mm, is '
+                                 f'shorter than the first segment, {ends[0] * 1e3:.4g} mm')
+    document = {'name': keys.pop('name', path.name.split('.')[0]), 'tentacle': str(tentacle),
+                'path': block, 'insertion_steps_m': list(insertion_steps_m),
+                **{k: v for k, v in keys.items() if v is not None}}
+    scene = parse_scene(document, source)
+    # What a scene file's digest is: of everything the plan is made from.
+    digest = hashlib.sha256(tentacle.read_bytes() + path.read_bytes()
+                            + repr(sorted(document.items(), key=str)).encode()).hexdigest()
+    return dataclasses.replace(scene, sha256=digest)
 
 
 def parse_scene(document, source, sha256=''):

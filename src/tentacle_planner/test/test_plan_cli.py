@@ -78,6 +78,50 @@ def test_bad_input_is_named_and_exits_2(tmp_path, capsys):
     assert not (tmp_path / 'o').exists()
 
 
+def test_a_tentacle_and_a_path_file_plan_as_the_same_scene_would(tmp_path, capsys):
+    scene_file = arc_scene(tmp_path)
+    scene = load_scene(scene_file)
+    csv = tmp_path / 'arc.csv'    # the same path in mm, as a lab exports it
+    np.savetxt(csv, scene.path.points_m * 1e3, delimiter=',', header='x_mm,y_mm,z_mm',
+               comments='')
+    out = tmp_path / 'out'
+    code = plan_cli.main(['--tentacle', str(BRAIDED), '--path', str(csv), '--out', str(out),
+                          '--steps', '0.03,0.04,0.05', '--max-field', '0.02', '--dof', '1',
+                          '--planar-magnetisation', '--starts', '1', '--iterations', '30'])
+    printed = capsys.readouterr()
+    assert code == 0, printed.out + printed.err
+    from_files = yaml.safe_load((out / 'schedule.yaml').read_text())
+    from_scene = schedule_document(plan_scene(scene, starts=1, iterations=30))
+    np.testing.assert_allclose([s['field_t'] for s in from_files['steps']],
+                               [s['field_t'] for s in from_scene['steps']], atol=1e-9)
+    assert from_files['scene']['name'] == 'arc'
+    # Without --steps: a key step at every segment end the path is long enough for.
+    assert plan_scene_steps(csv) == pytest.approx([0.01, 0.02, 0.03, 0.04, 0.05])
+
+
+def plan_scene_steps(path_file):
+    from tentacle_planner.scene import scene_of
+    return list(scene_of(BRAIDED, path_file).insertion_steps_m)
+
+
+@pytest.mark.parametrize('args, message', [
+    (['--tentacle', str(BRAIDED)], 'give --scene FILE, or --tentacle FILE and --path FILE'),
+    (['--scene', 'x.yaml', '--path', 'p.csv'], '--scene takes every setting'),
+    (['--tentacle', str(BRAIDED), '--path', 'p.csv', '--steps', '0.01,x'], 'commas'),
+])
+def test_conflicting_or_missing_options_are_refused(tmp_path, capsys, args, message):
+    with pytest.raises(SystemExit) as exit_:
+        plan_cli.main(args + ['--out', str(tmp_path / 'o')])
+    assert exit_.value.code == 2 and message in capsys.readouterr().err
+
+
+def test_a_missing_path_file_is_named(tmp_path, capsys):
+    missing = tmp_path / 'nowhere.csv'
+    assert plan_cli.main(['--tentacle', str(BRAIDED), '--path', str(missing),
+                          '--out', str(tmp_path / 'o')]) == 2
+    assert 'nowhere.csv' in capsys.readouterr().err
+
+
 def test_ctrl_c_keeps_the_best_plan_so_far(tmp_path):
     scene = load_scene(arc_scene(tmp_path))
     from tentacle_planner.planner import problem_of

@@ -40,7 +40,7 @@ def residual(joint_angles_rad, stiffness_n_m, moment_a_m2, psi_rad, field_t):
     return lam, distal * dtau_dpsi[None, :], distal @ dtau_db
 
 
-def residual_3dof(chain, joint_angles_rad, field_t):
+def residual_3dof(chain, joint_angles_rad, field_t, gravity_m_s2=(0.0, 0.0, 0.0)):
     """
     Return the 3-DoF torque balance and its derivatives at prescribed joint angles.
 
@@ -53,12 +53,13 @@ def residual_3dof(chain, joint_angles_rad, field_t):
     :param chain: a Chain; its moments_a_m2 are the moments the residual is evaluated at
     :param joint_angles_rad: (n, 3) prescribed joint angles Q
     :param field_t: (3,) uniform field, tesla
+    :param gravity_m_s2: (3,) gravity, world frame (it enters lambda, not the derivatives)
     :return: (lambda (n, 3) N m, d lambda / d B (n, 3, 3) N m / T,
         d lambda / d m (n, 3, n, 3) N m / (A m^2): [joint, angle, link, component])
     """
     q = np.asarray(joint_angles_rad, dtype=float)
     b = np.asarray(field_t, dtype=float)
-    state = spatial.evaluate(chain, q, b, hessian=False)
+    state = spatial.evaluate(chain, q, b, gravity_m_s2, hessian=False)
     lam = -state.gradient
     # a . (V x B) = B . (a x V): linear in B.
     d_field = spatial.cross(state.axes, state.distal_moments[:, None, :])

@@ -270,17 +270,27 @@ class Problem:
 
     def _direction_jacobian(self, solution, field_t, x):
         """Return d points / d direction angles ((n + 1) 3, angles) from moment sensitivity."""
-        chain = solution.chain
         d_points = self.model.moment_sensitivity(solution, field_t).points  # (n+1, 3, 3n)
-        d_points = d_points.reshape(-1, chain.size, 3)
-        magnitudes = self._magnitudes[solution.inserted_m]
-        out = np.zeros((d_points.shape[0], len(self.free_segments) * self.angles_per_segment))
+        return self.by_direction_angles(d_points.reshape(-1, solution.chain.size, 3),
+                                        solution.inserted_m, x)
+
+    def by_direction_angles(self, d_by_moments, inserted_m, x):
+        """
+        Return d r / d direction angles (rows, angles) from d r / d link moments.
+
+        :param d_by_moments: (rows, n, 3): d r by each link's moment vector (link frame),
+            per A m^2; a segment's links share its direction, each with its own magnitude
+        """
+        chain = self.model.chain(inserted_m)
+        magnitudes = self._magnitudes[inserted_m]
+        out = np.zeros((d_by_moments.shape[0],
+                        len(self.free_segments) * self.angles_per_segment))
         k = 0
         for i in self.free_segments:
             links = chain.segment_index == i
             azimuth = x[k]
             elevation = 0.0 if self.angles_per_segment == 1 else x[k + 1]
-            pulled = np.einsum('rlc,l->rc', d_points[:, links], magnitudes[links])
+            pulled = np.einsum('rlc,l->rc', d_by_moments[:, links], magnitudes[links])
             d_azimuth, d_elevation = _direction_derivatives(azimuth, elevation)
             out[:, k] = pulled @ d_azimuth
             if self.angles_per_segment == 2:
@@ -417,7 +427,8 @@ def _linear(matrix, limit):
             'jac': lambda x: -matrix / MILLITESLA}
 
 
-def optimise(problem, *, seed=0, starts=8, iterations=100, initial=None, progress=None):
+def optimise(problem, *, seed=0, starts=8, iterations=100, initial=None, progress=None,
+             first_stage=False):
     """
     Return the best Plan over a seeded multi-start, each start fitted by Gauss-Newton.
 
@@ -426,8 +437,12 @@ def optimise(problem, *, seed=0, starts=8, iterations=100, initial=None, progres
         than per-axis bounds apply): the budget that ends each start
     :param initial: an x to try first (e.g. the tip-driven baseline or a previous plan)
     :param progress: called with (start index, starts, best objective so far)
+    :param first_stage: fit each start on the thesis' torque balance first (balance.py),
+        then on the forward model
     """
+    from tentacle_planner.balance import BalanceProblem  # it builds on this module
     rng = np.random.default_rng(seed)
+    balance = BalanceProblem(problem) if first_stage else None
     limit = problem.constraints.max_field_t or problem.constraints.max_total_field_t or 0.02
     n_dir = len(problem.free_segments) * problem.angles_per_segment
     candidates = [] if initial is None else [np.asarray(initial, dtype=float)]
@@ -442,6 +457,8 @@ def optimise(problem, *, seed=0, starts=8, iterations=100, initial=None, progres
     best, best_key = None, None
     for index, x0 in enumerate(candidates):
         try:
+            if balance is not None:
+                x0 = fit(balance, x0, iterations)
             plan = problem.plan(fit(problem, x0, iterations))
         except KeyboardInterrupt:
             # Ctrl-C keeps the best plan so far (or the start itself, if none is done).

@@ -2,7 +2,7 @@
 tentacle-plan: a magnetisation profile and field schedule for a scene, verified.
 
     tentacle-plan --scene config/scenes/NAME.yaml --out DIR [--seed N] [--starts N]
-                  [--baseline tip-driven] [--robust]
+                  [--baseline tip-driven] [--robust] [--first-stage torque-balance]
     tentacle-plan --tentacle FILE --path FILE --out DIR [--steps M,M,...] [limits...]
 
 Writes DIR/schedule.yaml (DESIGN.md's schema) and DIR/plan.png and prints a summary. Exit
@@ -55,6 +55,9 @@ def build_parser():
                         help='model evaluations per start (default 100)')
     parser.add_argument('--baseline', choices=('tip-driven',), default=None,
                         help='tip-driven: every magnetisation axial, fields only')
+    parser.add_argument('--first-stage', choices=('torque-balance',), default=None,
+                        help="fit each start on the thesis' torque balance at the target "
+                        'shape first (fast, blind to stability), then on the forward model')
     parser.add_argument('--robust', action='store_true',
                         help='plan against every perturbed model, not only the nominal one')
     return parser
@@ -109,7 +112,7 @@ def main(args=None):
         return 2
     result = plan_scene(scene, seed=opts.seed, starts=opts.starts, iterations=opts.iterations,
                         tip_driven=opts.baseline == 'tip-driven', robust=opts.robust,
-                        progress=_progress)
+                        progress=_progress, first_stage=opts.first_stage == 'torque-balance')
     path = write_schedule(opts.out, result)
     print(summary(result))
     print(f'wrote {path} and {path.parent / "plan.png"}')

@@ -128,7 +128,7 @@ def recheck(scene, plan):
 
 
 def plan_scene(scene, *, seed=0, starts=8, iterations=100, tip_driven=False, robust=False,
-               progress=None):
+               progress=None, first_stage=False):
     """
     Return the SceneResult of a scene.
 
@@ -138,6 +138,7 @@ def plan_scene(scene, *, seed=0, starts=8, iterations=100, tip_driven=False, rob
     :param tip_driven: the baseline: every magnetisation axial, fields only
     :param robust: plan against the worst of the perturbed models, not the nominal one
     :param progress: called with (stage, done, total, best objective)
+    :param first_stage: fit each start on the thesis' torque balance first (balance.py)
     """
     problem = problem_of(scene, tip_driven)
 
@@ -149,7 +150,7 @@ def plan_scene(scene, *, seed=0, starts=8, iterations=100, tip_driven=False, rob
             lambda done, total, best: progress(stage, done, total, best))
 
     nominal = optimise(problem, seed=seed, starts=starts, iterations=iterations,
-                       progress=report_progress('plan'))
+                       progress=report_progress('plan'), first_stage=first_stage)
     interrupted = nominal.interrupted
     problems = perturbed_problems(problem)
     robust_plan, robust_rows = None, []

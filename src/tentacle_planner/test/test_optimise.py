@@ -124,3 +124,29 @@ def test_neighbouring_magnetisations_keep_within_the_angle_limit(braided):
     assert max(angles) <= limit + 1e-4
     assert d[-1] == pytest.approx([1.0, 0.0, 0.0])  # the distal segment axial
     assert np.all(d[:, 2] == 0.0)  # planar magnetisation
+
+
+@pytest.mark.parametrize('dof', [1, 3])
+def test_the_torque_balance_stage_is_zero_at_an_equilibrium_and_its_gradient_exact(braided, dof):
+    from tentacle_planner.balance import BalanceProblem
+    constraints = Constraints(planar_magnetisation=dof == 1)
+    model, x_true, targets = known_plan(braided, dof, constraints)
+    balance = BalanceProblem(Problem(model, STEPS_M, targets, constraints))
+    r, _ = balance.residuals(x_true)
+    if dof == 1:  # a planar target fixes every joint angle: it is the equilibrium itself
+        assert np.max(np.abs(r)) < 1e-7
+    x = np.random.default_rng(5).uniform(-1.0, 1.0, balance.size)
+    value, gradient = balance.objective(x)
+    assert value > 1e-3
+    h = 1e-6
+    fd = np.array([(balance.objective(x + e)[0] - balance.objective(x - e)[0]) / (2 * h)
+                   for e in np.eye(balance.size) * h])
+    assert gradient == pytest.approx(fd, abs=1e-6 * np.abs(fd).max())
+
+
+def test_a_plan_staged_on_the_torque_balance_is_verified_in_the_forward_model(braided):
+    constraints = Constraints(planar_magnetisation=True, max_field_t=0.02)
+    model, _, targets = known_plan(braided, 1, constraints)
+    problem = Problem(model, STEPS_M, targets, constraints)
+    plan = optimise(problem, seed=1, starts=2, iterations=60, first_stage=True)
+    assert plan.flags == [] and plan.shape_rms_m < 1e-6   # reachable: found exactly

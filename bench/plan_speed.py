@@ -28,8 +28,8 @@ sys.path[:0] = SOURCES
 
 import numpy as np  # noqa: E402
 from tentacle_model.statics import compile_kernels  # noqa: E402
-from tentacle_planner.balance import BalanceProblem  # noqa: E402
 from tentacle_planner import paths  # noqa: E402
+from tentacle_planner.balance import BalanceProblem  # noqa: E402
 from tentacle_planner.optimise import optimise  # noqa: E402
 from tentacle_planner.planner import problem_of  # noqa: E402
 from tentacle_planner.playback import playback  # noqa: E402

@@ -132,8 +132,9 @@ def discretise(spec, inserted_m=None, sublinks=1, backbone_m=0.0):
     s_start = np.array([r[0] for r in rows])
     bend = np.array([r[2].bend_stiffness_n_m2 for r in rows]).reshape(n, 3)
     if spec.backbone is not None and backbone_m > 0:
-        # Joints within the backbone's reach (free arc length from the base) are stiffened.
-        inside = (s_start - s_base) < backbone_m
+        # Links within the backbone's reach (free arc length from the base) are stiffened;
+        # one that starts where the backbone ends is free, whatever the rounding of either.
+        inside = (s_start - s_base) < backbone_m - 1e-9 * total
         bend[inside, :2] += spec.backbone.stiffness_n_m2
     half_compliance = (lengths / 2)[:, None] / bend
     compliance = half_compliance.copy()

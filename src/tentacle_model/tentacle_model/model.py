@@ -77,21 +77,27 @@ class TentacleModel:
         self.gravity_m_s2 = np.asarray(gravity_m_s2, dtype=float)
         self.dipoles, self.backbone_m = dipoles, backbone_m
         self.tol, self.max_iterations = tol, max_iterations
-        self._chains, self._unloaded = {}, {}
+        self._chains = {}
         self.chain(spec.length_m)  # a bad knob is refused now, not at the first solve
 
-    def chain(self, inserted_m):
-        """Return the Chain at an inserted length (m), built once."""
-        key = round(float(inserted_m), 12)
+    def chain(self, inserted_m, backbone_m=None):
+        """
+        Return the Chain at an inserted length (m), built once.
+
+        :param backbone_m: how far the backbone reaches past the base, m (default the
+            model's): a backbone schedule moves it from step to step
+        """
+        backbone = self.backbone_m if backbone_m is None else float(backbone_m)
+        key = (round(float(inserted_m), 12), round(backbone, 12))
         if key not in self._chains:
-            self._chains[key] = discretise(self.spec, key, self.sublinks, self.backbone_m)
+            self._chains[key] = discretise(self.spec, key[0], self.sublinks, key[1])
         return self._chains[key]
 
     def straight(self, inserted_m):
         """Return the straight state (n, 3) at an inserted length."""
         return np.zeros((self.chain(inserted_m).size, 3))
 
-    def solve(self, inserted_m, field_t, state=None, moments_a_m2=None):
+    def solve(self, inserted_m, field_t, state=None, moments_a_m2=None, backbone_m=None):
         """
         Return the Solution at an inserted length in a field, from a state (default straight).
 
@@ -100,9 +106,10 @@ class TentacleModel:
         :param state: (n, 3) joint angles to start from, for this inserted length (see carry)
         :param moments_a_m2: (n, 3) link moments (link frame) in place of the tentacle's own:
             the planner's magnetisation
+        :param backbone_m: the backbone's reach past the base, m (default the model's)
         :raises ValueError: a state or moments of another shape, a non-finite field
         """
-        chain = self.chain(inserted_m)
+        chain = self.chain(inserted_m, backbone_m)
         if moments_a_m2 is not None:
             moments = np.asarray(moments_a_m2, dtype=float)
             if moments.shape != (chain.size, 3) or not np.all(np.isfinite(moments)):
@@ -166,15 +173,6 @@ class TentacleModel:
         equilibrium can be stable in the plane and buckle out of it). > 0: stable.
         """
         return float(np.linalg.eigvalsh(self._evaluate(solution, field_t)[1].hessian)[0])
-
-    def unloaded_stability(self, inserted_m):
-        """Return the straight chain's stiffness alone, its smallest eigenvalue, N m / rad^2."""
-        key = round(float(inserted_m), 12)
-        if key not in self._unloaded:
-            chain = self.chain(inserted_m)
-            hessian = spatial.evaluate(chain, np.zeros((chain.size, 3)), np.zeros(3)).hessian
-            self._unloaded[key] = float(np.linalg.eigvalsh(hessian)[0])
-        return self._unloaded[key]
 
     def _free(self, n):
         """Return the indices of the model's free angles in the flattened (3n,) state."""

@@ -129,4 +129,3 @@ def test_a_planar_equilibrium_unstable_out_of_its_plane_is_seen():
     assert planar.stability(solution, [-field, 0, 0]) == pytest.approx(
         min(k_out - moment * field, k_twist), rel=1e-6)
     assert planar.stability(solution, [-field, 0, 0]) < 0 < solution.equilibrium.stability
-    assert planar.unloaded_stability(0.01) == pytest.approx(min(k_in, k_out, k_twist))

@@ -27,8 +27,9 @@ class BalanceProblem:
         self.problem = problem
         model = problem.model
         self._angles = []
-        for inserted_m, target in zip(problem.steps_m, problem.targets):
-            chain = model.chain(inserted_m)
+        for inserted_m, backbone_m, target in zip(problem.steps_m, problem.backbones_m,
+                                                  problem.targets):
+            chain = model.chain(inserted_m, backbone_m)
             angles = angles_along(chain, link_directions(chain, target))
             if model.dof == 1:
                 angles[:, 1:] = 0.0
@@ -53,7 +54,7 @@ class BalanceProblem:
         rows, jacobians = [], []
         for k, (inserted_m, angles, field_t) in enumerate(zip(p.steps_m, self._angles,
                                                               fields)):
-            chain = replace(model.chain(inserted_m),
+            chain = replace(model.chain(inserted_m, p.backbones_m[k]),
                             moments_a_m2=p._moments(directions, inserted_m))
             lam, d_field, d_moment = residual_3dof(chain, angles, field_t,
                                                    model.gravity_m_s2)

@@ -57,6 +57,7 @@ class Step:
     tip_error_m: float
     stability: float               # smallest 3-DoF Hessian eigenvalue, N m/rad^2 (> 0: stable)
     converged: bool
+    backbone_m: float = 0.0        # how far the backbone reached past the base, m
 
 
 @dataclass(frozen=True)
@@ -85,12 +86,14 @@ class Problem:
     """A plan's unknowns, objective with its gradient, and constraints."""
 
     def __init__(self, model, steps_m, targets_m, constraints=Constraints(),
-                 directions=None, start=None, free=None, min_margin=MIN_STABILITY_MARGIN):
+                 directions=None, start=None, free=None, min_margin=MIN_STABILITY_MARGIN,
+                 backbones_m=None):
         """
         Set up the problem.
 
         :param model: a TentacleModel (its joint model, sub-links, gravity, dipoles)
-        :param steps_m: inserted lengths of the key steps, m, increasing
+        :param steps_m: inserted lengths of the key steps, m, in order (increasing, or
+            repeated where a backbone schedule moves the backbone instead)
         :param targets_m: per step, (n_k + 1, 3) the target of the chain's joints and tip, m
         :param constraints: Constraints
         :param directions: (segments, 3) magnetisation directions to hold fixed (fields only)
@@ -98,9 +101,13 @@ class Problem:
             first step starts straight)
         :param free: with directions: the segments whose directions are unknowns after all
         :param min_margin: the stability margin under which a step is penalised (0: never)
+        :param backbones_m: per step, how far the backbone reaches past the base, m (default:
+            the model's own at every step)
         """
         self.model, self.constraints = model, constraints
         self.steps_m = [float(s) for s in steps_m]
+        self.backbones_m = [model.backbone_m] * len(self.steps_m) if backbones_m is None \
+            else [float(b) for b in backbones_m]
         self.targets = [np.asarray(t, dtype=float) for t in targets_m]
         self.length_m = model.spec.length_m
         for s, t in zip(self.steps_m, self.targets):
@@ -175,11 +182,11 @@ class Problem:
         directions, fields = self.unpack(x)
         solutions = []
         state, previous = (None, None) if self.start is None else self.start
-        for inserted_m, field_t in zip(self.steps_m, fields):
+        for inserted_m, backbone_m, field_t in zip(self.steps_m, self.backbones_m, fields):
             if state is not None:
                 state = self.model.carry(state, previous, inserted_m)
             solution = self.model.solve(inserted_m, field_t, state,
-                                        self._moments(directions, inserted_m))
+                                        self._moments(directions, inserted_m), backbone_m)
             solutions.append(solution)
             state, previous = solution.state, inserted_m
         return solutions
@@ -230,7 +237,8 @@ class Problem:
         """Return a step's stability margin: its 3-DoF stability over the unloaded body's."""
         stability = solution.equilibrium.stability if self.model.dof == 3 else \
             self.model.stability(solution, field_t)
-        return stability / self.model.unloaded_stability(solution.inserted_m)
+        # Straight and unloaded, the Hessian is the joint stiffness, diagonal.
+        return stability / float(np.min(solution.chain.stiffness_n_m))
 
     def _stability_penalty(self, k, solution, field_t, x, jacobian):
         """
@@ -257,7 +265,8 @@ class Problem:
             moved[j] += MARGIN_STEP
             directions, fields = self.unpack(moved)
             other = self.model.solve(inserted_m, fields[k], solution.state,
-                                     self._moments(directions, inserted_m))
+                                     self._moments(directions, inserted_m),
+                                     self.backbones_m[k])
             if other.equilibrium.converged:
                 d_margin = (self.margin(other, fields[k]) - margin) / MARGIN_STEP
                 d_penalty[j] = -STABILITY_WEIGHT / self.min_margin * d_margin
@@ -376,7 +385,7 @@ class Problem:
                 else self.model.stability(solution, field_t)
             steps.append(Step(solution.inserted_m, field_t, solution.points_m,
                               float(np.sqrt(np.mean(distances ** 2))), float(distances[-1]),
-                              stability, eq.converged))
+                              stability, eq.converged, self.backbones_m[k]))
             if not eq.converged:
                 flags.append(f'step {k + 1} did not converge: {eq.reason}')
             elif not stability > 0:
@@ -448,6 +457,11 @@ def optimise(problem, *, seed=0, starts=8, iterations=100, initial=None, progres
     candidates = [] if initial is None else [np.asarray(initial, dtype=float)]
     if starts and isinstance(problem, Problem):
         candidates.append(insertion_order_start(problem, rng, iterations))
+        if not n_dir:
+            # Fields alone: each step's equilibrium depends on its own field and the state
+            # before it, so the steps separate and the insertion-order start, which fits
+            # them in turn as the rig runs them, is the search; random fields add nothing.
+            starts = 0
     for _ in range(starts):
         directions = rng.uniform(-math.pi, math.pi, n_dir)
         if problem.angles_per_segment == 2:
@@ -499,14 +513,16 @@ def insertion_order_start(problem, rng, iterations=100, tries=4):
     directions, _ = problem.unpack(np.zeros(problem.size))
     fields, seen, start = [], set(), None
     field_t = np.zeros(3)
-    for inserted_m, target in zip(problem.steps_m, problem.targets):
+    for inserted_m, backbone_m, target in zip(problem.steps_m, problem.backbones_m,
+                                              problem.targets):
         chain = model.chain(inserted_m)
-        new = sorted(set(chain.segment_index.tolist()) - seen)
-        seen |= set(new)
+        entering = set(chain.segment_index.tolist()) - seen
+        seen |= entering
+        new = sorted(entering & set(problem.free_segments))  # a held direction stays held
         best = None
         for _ in range(tries):
             stage = Problem(model, [inserted_m], [target], bounds_only, directions=directions,
-                            start=start, free=new)
+                            start=start, free=new, backbones_m=[backbone_m])
             guess = directions.copy()
             for i in stage.free_segments:
                 guess[i] = _direction(rng.uniform(-math.pi, math.pi),

@@ -50,19 +50,34 @@ def constraints_of(scene, tip_driven=False):
         distal_axial=m.distal_axial, tip_driven=tip_driven)
 
 
-def problem_of(scene, tip_driven=False):
-    """Return the Problem of a scene's key steps, in its planning model (no dipoles)."""
-    model = scene.tentacle_model(dipoles=False)
+def key_steps(scene, model):
+    """Return (inserted lengths, backbone reaches, targets) of a scene's key steps, m."""
     steps = list(scene.insertion_steps_m)
-    targets = [paths.targets(scene.path, model.chain(s), s) for s in steps]
-    return Problem(model, steps, targets, constraints_of(scene, tip_driven))
+    backbones = list(scene.backbone_steps_m or [0.0] * len(steps))
+    targets = [paths.targets(scene.target_path(s, b), model.chain(s), s)
+               for s, b in zip(steps, backbones)]
+    return steps, backbones, targets
+
+
+def problem_of(scene, tip_driven=False):
+    """
+    Return the Problem of a scene's key steps, in its planning model.
+
+    The scene's model, except that magnet-to-magnet interaction is left out where the
+    magnetisation is planned (the moment sensitivity does not include it): such plans are
+    verified with it (recheck). Fields alone, for a given magnetisation, are planned with it.
+    """
+    given = scene.magnetisation.given and not tip_driven
+    model = scene.tentacle_model(dipoles=scene.model.dipoles and given)
+    steps, backbones, targets = key_steps(scene, model)
+    return Problem(model, steps, targets, constraints_of(scene, tip_driven),
+                   directions=scene.own_directions() if given else None,
+                   backbones_m=backbones)
 
 
 def shape_rms(scene, steps):
     """Return the shape error over steps, m: DESIGN.md's (paths.shape_error), RMS."""
-    return float(np.sqrt(np.mean([paths.shape_error(step.points_m, scene.path,
-                                                    step.inserted_m)[0] ** 2
-                                  for step in steps])))
+    return float(np.sqrt(np.mean([scene.shape_error(step)[0] ** 2 for step in steps])))
 
 
 def step_clearance(scene, step):
@@ -92,7 +107,8 @@ def fuller_models(scene):
     sub-links, 3-DoF joints (twist and out-of-plane bending), the scene's gravity and the
     interaction, as large as the solver's size limits allow.
     """
-    out = [('the scene model with magnet-to-magnet interaction', {})] if scene.model.dipoles \
+    planned_without = scene.model.dipoles and not scene.magnetisation.given
+    out = [('the scene model with magnet-to-magnet interaction', {})] if planned_without \
         else []
     for sublinks in range(scene.model.sublinks * HIGHER_FIDELITY_SUBLINKS,
                           scene.model.sublinks, -1):
@@ -118,9 +134,8 @@ def recheck(scene, plan):
     rows, flags = [], []
     for what, options in fuller_models(scene):
         model = scene.tentacle_model(**options)
-        steps = [step.inserted_m for step in plan.steps]
-        targets = [paths.targets(scene.path, model.chain(s), s) for s in steps]
-        problem = Problem(model, steps, targets)
+        steps, backbones, targets = key_steps(scene, model)
+        problem = Problem(model, steps, targets, backbones_m=backbones)
         played = problem.plan(problem.pack(plan.directions, plan.fields_t))
         rows.append((what, shape_rms(scene, played.steps)))
         flags += [f'{flag} ({what.split(":")[0]})' for flag in played.flags]
@@ -143,7 +158,7 @@ def plan_scene(scene, *, seed=0, starts=8, iterations=100, tip_driven=False, rob
     problem = problem_of(scene, tip_driven)
 
     def error(step):
-        return paths.shape_error(step.points_m, scene.path, step.inserted_m)[0]
+        return scene.shape_error(step)[0]
 
     def report_progress(stage):
         return None if progress is None else (

@@ -62,7 +62,7 @@ def perturbed_problems(problem):
         model = variant(problem.model, perturbed(problem.model.spec, **change))
         out.append((name, Problem(model, problem.steps_m, problem.targets,
                                   problem.constraints, problem.fixed_directions,
-                                  problem.start)))
+                                  problem.start, backbones_m=problem.backbones_m)))
     return out
 
 

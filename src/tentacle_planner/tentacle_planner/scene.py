@@ -45,11 +45,12 @@ import yaml
 
 MAX_FILE_BYTES = 64 * 1024  # as a tentacle file: PyYAML takes up to a second on this much
 TOP_KEYS = ('name', 'tentacle', 'path', 'insertion_steps_m', 'playback_step_m', 'coil',
-            'obstacles', 'model', 'magnetisation')
-REQUIRED_KEYS = ('tentacle', 'path', 'insertion_steps_m')
+            'obstacles', 'model', 'magnetisation', 'backbone_steps_m', 'coiling')
+REQUIRED_KEYS = ('tentacle', 'insertion_steps_m')
+COIL_PATH_STEP_M = 0.25e-3  # the points of a coiling target, this far apart
 COIL_KEYS = ('max_field_t', 'max_total_field_t', 'max_field_change_t')
 MODEL_KEYS = ('dof', 'sublinks', 'gravity_m_s2', 'dipoles')
-MAGNETISATION_KEYS = ('planar', 'max_neighbour_angle_deg', 'distal_axial')
+MAGNETISATION_KEYS = ('planar', 'max_neighbour_angle_deg', 'distal_axial', 'given')
 
 
 @dataclass(frozen=True)
@@ -93,6 +94,7 @@ class MagnetisationLimits:
     planar: bool = False                          # directions in the link's x-y plane
     max_neighbour_angle_deg: float | None = None  # between neighbouring segments
     distal_axial: bool = False                    # the tip segment magnetised along its axis
+    given: bool = False                           # the tentacle file's directions: fields only
 
 
 @dataclass(frozen=True, eq=False)
@@ -112,6 +114,33 @@ class Scene:
     walls: tuple                  # Wall
     model: ModelSettings
     magnetisation: MagnetisationLimits
+    backbone_steps_m: tuple | None = None   # the backbone's reach past the base per key step
+    coiling_radius_m: float | None = None   # the target coils at this radius past the backbone
+    coiling_side: int = 1                   # +1: towards the base normal (link y), -1: away
+
+    def target_path(self, inserted_m, backbone_m=0.0):
+        """
+        Return the Path a step's body is to lie along (rig frame).
+
+        The scene's path; for a coiling scene, the body straight along the insertion
+        direction as far as the backbone reaches, then an arc of coiling_radius_m.
+        """
+        if self.coiling_radius_m is None:
+            return self.path
+        return coiling_path(self.tentacle, backbone_m, self.coiling_radius_m,
+                            self.coiling_side, f'{self.source}: coiling')
+
+    def shape_error(self, step):
+        """Return (shape RMS, tip error), m, of a Step (paths.shape_error, DESIGN.md)."""
+        return paths.shape_error(step.points_m, self.target_path(step.inserted_m,
+                                                                 step.backbone_m),
+                                 step.inserted_m)
+
+    def own_directions(self):
+        """Return the tentacle file's magnetisation directions (segments, 3); 0: passive."""
+        m = np.array([seg.magnetisation_a_per_m for seg in self.tentacle.segments])
+        norms = np.linalg.norm(m, axis=1)
+        return np.divide(m, norms[:, None], out=np.zeros_like(m), where=norms[:, None] > 0)
 
     def tentacle_model(self, **options):
         """Return a TentacleModel of the scene's tentacle and model settings (options override)."""
@@ -119,6 +148,21 @@ class Scene:
                     'gravity_m_s2': self.model.gravity_m_s2, 'dipoles': self.model.dipoles}
         settings.update(options)
         return TentacleModel(self.tentacle, **settings)
+
+
+def coiling_path(spec, straight_m, radius_m, side, source):
+    """
+    Return a Path from the base: straight_m along the insertion direction, then an arc.
+
+    :param radius_m: the arc's radius, m; it turns towards the base normal for side +1
+    """
+    origin, rotation = spec.base_position_m, spec.base_rotation
+    s = np.arange(0.0, spec.length_m + 2 * COIL_PATH_STEP_M, COIL_PATH_STEP_M)
+    turned = np.maximum(s - straight_m, 0.0) / radius_m      # rad, past the backbone's end
+    along = np.minimum(s, straight_m) + radius_m * np.sin(turned)
+    across = side * radius_m * (1 - np.cos(turned))
+    points = origin + along[:, None] * rotation[:, 0] + across[:, None] * rotation[:, 1]
+    return paths.Path(points, source)
 
 
 def load_scene(path):
@@ -207,8 +251,18 @@ def parse_scene(document, source, sha256=''):
         read.fail('name', f'expected a non-empty string, got {name!r}')
     tentacle_file, spec = _tentacle(read, doc['tentacle'], source)
     model = _model(read, doc.get('model', {}))
-    steps = _steps(read, doc['insertion_steps_m'], spec)
+    if ('path' in doc) == ('coiling' in doc):
+        read.fail('top level', 'give either path (a centreline to follow) or coiling (coil '
+                  'past the backbone, with backbone_steps_m)')
+    backbones = None
+    if 'backbone_steps_m' in doc:
+        steps, backbones = _backbone_steps(read, doc, spec)
+    else:
+        steps = _steps(read, doc['insertion_steps_m'], spec)
     playback = doc.get('playback_step_m')
+    if playback is not None and backbones is not None:
+        read.fail('playback_step_m', 'dense playback of a backbone schedule is not supported: '
+                  'give every backbone position as a key step')
     if playback is not None:
         playback = read.number(playback, 'playback_step_m')
         if playback > steps[-1]:
@@ -220,8 +274,12 @@ def parse_scene(document, source, sha256=''):
                            chain.interacting_pair_count() if model.dipoles else 0)
     except ValueError as exc:  # ProblemTooLarge is one
         read.fail('model.sublinks', str(exc))
-    path = paths.load_path(doc['path'], spec.base_position_m, spec.base_rotation,
-                           source.parent, source)
+    coiling = (None, 1) if 'coiling' not in doc else _coiling(read, doc, backbones)
+    if coiling[0] is None:
+        path = paths.load_path(doc['path'], spec.base_position_m, spec.base_rotation,
+                               source.parent, source)
+    else:  # the deepest step's target stands for the path (the picture, the schedule)
+        path = coiling_path(spec, backbones[-1], *coiling, f'{source}: coiling')
     deepest = len(steps) - 1
     if path.length_m < steps[-1] * (1 - 1e-9):
         read.fail(f'insertion_steps_m[{deepest}]',
@@ -237,7 +295,7 @@ def parse_scene(document, source, sha256=''):
         _check_clear(read, path, sphere, index)
     magnetisation = _magnetisation(read, doc.get('magnetisation', {}))
     return Scene(name, source, sha256, tentacle_file, spec, path, steps, playback, coil,
-                 spheres, walls, model, magnetisation)
+                 spheres, walls, model, magnetisation, backbones, *coiling)
 
 
 def _tentacle(read, value, source):
@@ -265,7 +323,43 @@ def _model(read, raw):
     return ModelSettings(int(dof), sublinks, gravity, dipoles)
 
 
-def _steps(read, raw, spec):
+def _backbone_steps(read, doc, spec):
+    """Return (insertion steps, backbone steps): one insertion for all, or one per step."""
+    raw = doc['backbone_steps_m']
+    if spec.backbone is None:
+        read.fail('backbone_steps_m', f'the tentacle {spec.name!r} has no backbone (its file '
+                  'has no backbone: block)')
+    if not isinstance(raw, list) or not raw:
+        read.fail('backbone_steps_m', f'expected a non-empty list of backbone reaches past '
+                  f'the base (m), got {raw!r}')
+    backbones = [read.number(v, f'backbone_steps_m[{i}]', allow_zero=True)
+                 for i, v in enumerate(raw)]
+    inserted = _steps(read, doc['insertion_steps_m'], spec, increasing=False)
+    if len(inserted) == 1:
+        inserted = inserted * len(backbones)
+    if len(inserted) != len(backbones):
+        read.fail('backbone_steps_m', f'{len(backbones)} backbone steps for '
+                  f'{len(inserted)} insertion steps: give one insertion for all, or one each')
+    for i, (a, b) in enumerate(zip(inserted, backbones)):
+        if b > a * (1 + 1e-12):
+            read.fail(f'backbone_steps_m[{i}]', f'{b:g} m reaches past the inserted length, '
+                      f'{a:g} m')
+    return tuple(inserted), tuple(backbones)
+
+
+def _coiling(read, doc, backbones):
+    """Return (radius m, side) of a coiling block."""
+    raw = read.mapping(doc['coiling'], 'coiling', ('radius_m', 'side'), ('radius_m',))
+    if backbones is None:
+        read.fail('coiling', 'a coiling target needs backbone_steps_m: the body coils past '
+                  'the backbone')
+    side = raw.get('side', 1)
+    if side not in (1, -1) or isinstance(side, bool):
+        read.fail('coiling.side', f'expected 1 (towards the base normal) or -1, got {side!r}')
+    return read.number(raw['radius_m'], 'coiling.radius_m'), int(side)
+
+
+def _steps(read, raw, spec, increasing=True):
     if not isinstance(raw, list) or not raw:
         read.fail('insertion_steps_m', f'expected a non-empty list of inserted lengths (m), '
                   f'got {raw!r}')
@@ -276,7 +370,7 @@ def _steps(read, raw, spec):
         if step > spec.length_m * (1 + 1e-12):
             read.fail(where, f'{step:g} m is more than the length of the tentacle, '
                       f'{spec.length_m:g} m')
-        if steps and step <= steps[-1]:
+        if steps and (step <= steps[-1] if increasing else step < steps[-1]):
             read.fail(where, f'{step:g} m does not increase on insertion_steps_m[{i - 1}] '
                       f'({steps[-1]:g} m): steps are in insertion order')
         steps.append(min(step, spec.length_m))
@@ -317,7 +411,8 @@ def _magnetisation(read, raw):
     return MagnetisationLimits(read.flag(raw.get('planar', False), 'magnetisation.planar'),
                                angle,
                                read.flag(raw.get('distal_axial', False),
-                                         'magnetisation.distal_axial'))
+                                         'magnetisation.distal_axial'),
+                               read.flag(raw.get('given', False), 'magnetisation.given'))
 
 
 def _check_in_base_plane(path, spec):

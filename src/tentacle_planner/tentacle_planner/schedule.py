@@ -13,7 +13,6 @@ figures and the flags. ``plot_plan`` draws DIR/plan.png. Shape errors are the pr
 import pathlib
 
 import numpy as np
-from tentacle_planner.paths import shape_error
 from tentacle_planner.planner import magnetisation_angles_deg, shape_rms, step_clearance
 import yaml
 
@@ -40,13 +39,15 @@ def schedule_document(result):
     played = result.playback_steps or plan.steps
     steps = []
     for step in played:
-        rms, tip = shape_error(step.points_m, scene.path, step.inserted_m)
+        rms, tip = scene.shape_error(step)
         steps.append({'insertion_m': round(step.inserted_m, 9),
                       'key': round(step.inserted_m, 12) in key,
                       'field_t': [round(float(v), 9) for v in step.field_t],
                       'predicted_centreline_m': _floats(step.points_m),
                       'shape_rms_m': round(rms, 9), 'tip_error_m': round(tip, 9),
                       'stability': float(f'{step.stability:.6g}')})
+        if scene.backbone_steps_m:
+            steps[-1]['backbone_m'] = round(step.backbone_m, 9)
         if scene.obstacles or scene.walls:
             steps[-1]['clearance_m'] = round(step_clearance(scene, step)[0], 9)
     angles = magnetisation_angles_deg(plan.directions)
@@ -100,6 +101,12 @@ def plot_plan(result, png_path):
     def plane(points):  # the base plane's coordinates, mm
         return (np.asarray(points) - origin) @ rotation[:, :2] * 1e3
 
+    backbone = bool(scene.backbone_steps_m)
+
+    def label(step):  # what tells the steps apart: insertion, or the backbone's free length
+        free = step.inserted_m - step.backbone_m
+        return f'{free * 1e3:.1f} mm free' if backbone else f'{step.inserted_m * 1e3:.0f} mm'
+
     fig, (shape_ax, field_ax) = plt.subplots(1, 2, figsize=(12, 5.5))
     path = plane(scene.path.points_m)
     shape_ax.plot(path[:, 0], path[:, 1], 'k--', lw=1, label='path')
@@ -110,9 +117,9 @@ def plot_plan(result, png_path):
     span = max(np.ptp(path[:, 0]), np.ptp(path[:, 1]), 1.0)
     for step, colour in zip(plan.steps, colours):
         body = plane(step.points_m)
-        rms, _ = shape_error(step.points_m, scene.path, step.inserted_m)
+        rms, _ = scene.shape_error(step)
         shape_ax.plot(body[:, 0], body[:, 1], 'o-', color=colour, ms=3,
-                      label=f'{step.inserted_m * 1e3:.0f} mm: RMS {rms * 1e3:.2f} mm')
+                      label=f'{label(step)}: RMS {rms * 1e3:.2f} mm')
         b = step.field_t @ rotation[:, :2]
         scale = 0.15 * span / max(np.max(np.abs(plan.fields_t)), 1e-12)
         shape_ax.annotate('', body[-1] + b * scale, body[-1],
@@ -135,16 +142,18 @@ def plot_plan(result, png_path):
     shape_ax.set_ylabel('base-plane normal (mm)')
     shape_ax.set_title(f'{scene.name}: body at every key step, field (arrows at the tip), '
                        'magnetisation (red, last step)', fontsize=9)
-    shape_ax.legend(fontsize=7, loc='best')
+    shape_ax.legend(fontsize=7, loc='best', ncol=1 + len(plan.steps) // 8)
     played = result.playback_steps or plan.steps
-    lengths = [s.inserted_m * 1e3 for s in played]
+    lengths = [(s.inserted_m - s.backbone_m if backbone else s.inserted_m) * 1e3
+               for s in played]
     fields = np.array([s.field_t for s in played]) * 1e3
     for axis, name in enumerate('xyz'):
         field_ax.plot(lengths, fields[:, axis], '.-', label=f'B{name}')
     if scene.coil.max_field_t:
         for sign in (1, -1):
             field_ax.axhline(sign * scene.coil.max_field_t * 1e3, color='0.6', ls=':')
-    field_ax.set_xlabel('inserted length (mm)')
+    field_ax.set_xlabel('free length past the backbone (mm)' if backbone
+                        else 'inserted length (mm)')
     field_ax.set_ylabel('field (mT, coil frame)')
     field_ax.set_title('field schedule' + (' (dense playback)' if result.playback_steps
                                            else ''), fontsize=9)
@@ -162,19 +171,22 @@ def summary(result):
              + (f', {len(result.playback_steps)} playback steps' if result.playback_steps
                 else '') + (' [INTERRUPTED: best plan so far]' if result.interrupted else ''),
              '  step  inserted   field (mT)                 shape RMS        tip error  stability'
-             + ('  clearance' if scene.obstacles or scene.walls else '')]
+             + ('  clearance' if scene.obstacles or scene.walls else '')
+             + ('   backbone' if scene.backbone_steps_m else '')]
     for k, step in enumerate(plan.steps):
-        rms, tip = shape_error(step.points_m, scene.path, step.inserted_m)
+        rms, tip = scene.shape_error(step)
         b = ' '.join(f'{v * 1e3:7.2f}' for v in step.field_t)
         gap = (f'  {step_clearance(scene, step)[0] * 1e3:6.2f} mm' if scene.obstacles
                or scene.walls else '')
+        gap += f'  {step.backbone_m * 1e3:6.1f} mm' if scene.backbone_steps_m else ''
         lines.append(f'  {k + 1:4d}  {step.inserted_m * 1e3:6.1f} mm  {b}   '
                      f'{rms * 1e3:6.3f} mm {100 * rms / length:5.2f}%   {tip * 1e3:6.3f} mm  '
                      f'{step.stability:9.3g}{gap}')
     angles = magnetisation_angles_deg(plan.directions)
-    lines.append('  magnetisation (azimuth, elevation in the link frame, deg): ' + ', '.join(
-        f'{i + 1}: ({angles[i, 0]:.1f}, {angles[i, 1]:.1f})'
-        for i, d in enumerate(plan.directions) if np.any(d)))
+    given = ' (given by the tentacle file)' if scene.magnetisation.given else ''
+    lines.append(f'  magnetisation{given} (azimuth, elevation in the link frame, deg): '
+                 + ', '.join(f'{i + 1}: ({angles[i, 0]:.1f}, {angles[i, 1]:.1f})'
+                             for i, d in enumerate(plan.directions) if np.any(d)))
     worst = max(result.robustness, key=lambda row: row[2])
     lines.append(f'  robustness: nominal {result.robustness[0][2] * 1e3:.3f} mm, worst '
                  f'{worst[2] * 1e3:.3f} mm ({worst[0]})')

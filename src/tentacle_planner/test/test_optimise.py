@@ -150,3 +150,34 @@ def test_a_plan_staged_on_the_torque_balance_is_verified_in_the_forward_model(br
     problem = Problem(model, STEPS_M, targets, constraints)
     plan = optimise(problem, seed=1, starts=2, iterations=60, first_stage=True)
     assert plan.flags == [] and plan.shape_rms_m < 1e-6   # reachable: found exactly
+
+
+def test_the_fields_of_a_backbone_schedule_are_recovered():
+    """A given magnetisation, the backbone withdrawn step by step: fields only."""
+    spec = load_tentacle(ROOT / 'config' / 'tentacles' / 'vsr_chapter6.yaml')
+    model = TentacleModel(spec, dof=1)
+    steps, backbones = [0.06] * 3, [0.05, 0.045, 0.04]
+    own = np.array([s.magnetisation_a_per_m / np.linalg.norm(s.magnetisation_a_per_m)
+                    for s in spec.segments])
+    blank = [np.zeros((model.chain(0.06).size + 1, 3))] * 3
+    truth = Problem(model, steps, blank, directions=own, backbones_m=backbones)
+    assert truth.size == 6                                  # two field axes a step, no more
+    x_true = np.array([3.0, 8.0, 1.0, 9.0, -2.0, 10.0])     # mT
+    solutions = truth.simulate(x_true)
+    for solution, backbone in zip(solutions, backbones):
+        supported = solution.chain.s_start_m < backbone - 1e-9   # each step's own backbone
+        stiffness = solution.chain.stiffness_n_m[:, 0]
+        # An interior joint is EI / h (half of each neighbouring link in series): the
+        # backbone's EI adds to the strip's where it reaches (the first free joint is mixed).
+        ei = spec.segments[0].bend_stiffness_n_m2[0]
+        np.testing.assert_allclose(stiffness[supported][1:], (ei + spec.backbone.stiffness_n_m2)
+                                   / 0.0025, rtol=1e-9)
+        np.testing.assert_allclose(stiffness[~supported][1:], ei / 0.0025, rtol=1e-9)
+        bends = np.abs(solution.state[:, 0])
+        assert bends[supported].max() < 0.02 * bends[~supported].max()
+    problem = Problem(model, steps, [s.points_m for s in solutions], directions=own,
+                      backbones_m=backbones)
+    plan = optimise(problem, seed=0, starts=3, iterations=60)
+    assert plan.shape_rms_m < 1e-8 and plan.flags == []
+    np.testing.assert_allclose(problem.pack(plan.directions, plan.fields_t), x_true, atol=1e-5)
+    assert [s.backbone_m for s in plan.steps] == backbones

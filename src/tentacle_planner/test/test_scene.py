@@ -137,7 +137,7 @@ def test_a_slicer_path_is_placed_at_the_insertion_pose(folder):
     (['magnetisation', 'axial'], True, r"magnetisation: unknown key\(s\) \['axial'\]"),
     (['obstacles', 0, 'radius'], 0.001, r"obstacles\[0\]: unknown key\(s\) \['radius'\]"),
     (['tentacle'], KeyError, r"top level: missing key\(s\) \['tentacle'\]"),
-    (['path'], KeyError, r"top level: missing key\(s\) \['path'\]"),
+    (['path'], KeyError, r'top level: give either path \(a centreline to follow\) or coiling'),
     (['insertion_steps_m'], KeyError, r"top level: missing key\(s\) \['insertion_steps_m'\]"),
     (['obstacles', 0, 'radius_m'], KeyError, r"obstacles\[0\]: missing key\(s\) \['radius_m'\]"),
     (['name'], 7, 'name: expected a non-empty string, got 7'),
@@ -233,3 +233,53 @@ def test_yaml_1_1_number_strings_are_numbers(folder):
 def test_parse_scene_takes_a_document(folder):
     scene = parse_scene(MINIMAL, folder / 'virtual.yaml', 'abc')
     assert scene.name == 'virtual' and scene.sha256 == 'abc'
+
+
+COILING = {'tentacle': '../tentacles/vsr.yaml', 'coiling': {'radius_m': 0.0075},
+           'insertion_steps_m': [0.06], 'backbone_steps_m': [0.05, 0.045, 0.04],
+           'model': {'dof': 1}, 'magnetisation': {'given': True}}
+
+
+@pytest.fixture
+def vsr_folder(folder):
+    shutil.copy(ROOT / 'config' / 'tentacles' / 'vsr_chapter6.yaml',
+                folder.parent / 'tentacles' / 'vsr.yaml')
+    return folder
+
+
+def test_a_coiling_target_is_straight_to_the_backbone_then_an_arc(vsr_folder):
+    scene = load_scene(write(vsr_folder, COILING))
+    assert scene.insertion_steps_m == (0.06,) * 3
+    assert scene.backbone_steps_m == (0.05, 0.045, 0.04)
+    np.testing.assert_allclose(scene.own_directions(), [
+        s.magnetisation_a_per_m / np.linalg.norm(s.magnetisation_a_per_m)
+        for s in scene.tentacle.segments])
+    path = scene.target_path(0.06, 0.045)
+    s = path.arc_lengths_m
+    straight, arc = path.points_m[s <= 0.045], path.points_m[s >= 0.045]
+    np.testing.assert_allclose(straight[:, 1:], 0.0, atol=1e-15)     # along the base x axis
+    np.testing.assert_allclose(straight[:, 0], s[s <= 0.045], atol=1e-12)
+    centre = np.array([0.045, 0.0075, 0.0])                            # turning towards +y
+    np.testing.assert_allclose(np.linalg.norm(arc - centre, axis=1), 0.0075, rtol=1e-12)
+    assert path.length_m == pytest.approx(0.06, abs=1e-3)
+    # The picture's and the schedule's path is the deepest step's target.
+    np.testing.assert_allclose(scene.path.points_m, scene.target_path(0.06, 0.04).points_m)
+
+
+@pytest.mark.parametrize('keys, value, message', [
+    (['backbone_steps_m'], [0.05, 0.07], r'backbone_steps_m\[1\]: 0.07 m reaches past'),
+    (['insertion_steps_m'], [0.06, 0.06], '3 backbone steps for 2 insertion steps'),
+    (['backbone_steps_m'], KeyError, 'a coiling target needs backbone_steps_m'),
+    (['coiling', 'side'], 0, r'coiling.side: expected 1 \(towards the base normal\) or -1'),
+    (['path'], {'points_m': STRAIGHT}, 'give either path'),
+    (['playback_step_m'], 0.001, 'dense playback of a backbone schedule is not supported'),
+])
+def test_bad_backbone_schedules_are_named(vsr_folder, keys, value, message):
+    with pytest.raises(PlanInputError, match=message):
+        load_scene(write(vsr_folder, changed(COILING, keys, value)))
+
+
+def test_a_backbone_schedule_needs_a_backbone(folder):
+    document = dict(MINIMAL, backbone_steps_m=[0.01])
+    with pytest.raises(PlanInputError, match="backbone_steps_m: the tentacle .* has no backbone"):
+        load_scene(write(folder, document))

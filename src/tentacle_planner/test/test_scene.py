@@ -281,5 +281,5 @@ def test_bad_backbone_schedules_are_named(vsr_folder, keys, value, message):
 
 def test_a_backbone_schedule_needs_a_backbone(folder):
     document = dict(MINIMAL, backbone_steps_m=[0.01])
-    with pytest.raises(PlanInputError, match="backbone_steps_m: the tentacle .* has no backbone"):
+    with pytest.raises(PlanInputError, match='backbone_steps_m: the tentacle .* has no backbone'):
         load_scene(write(folder, document))

@@ -11,13 +11,23 @@ Scene files (DESIGN.md, "Scenes and schedules"): what a plan is made for, valida
     coil: {max_field_t: 0.020, max_total_field_t: 0.030, max_field_change_t: 0.015}
     obstacles: [{centre_m: [x, y, z], radius_m: r}]   # or {walls: [{points_m: [...]}]}
     model: {dof: 3, sublinks: 1, gravity_m_s2: [0, 0, 0], dipoles: false}
-    magnetisation: {planar: false, max_neighbour_angle_deg: 60, distal_axial: false}
+    magnetisation: {planar: false, max_neighbour_angle_deg: 60, distal_axial: false,
+                    given: false}           # given: the tentacle file's directions, fields only
 
-Required: tentacle, path, insertion_steps_m. Every other key is optional, and so is each key
-of coil, model and magnetisation: an omitted limit is no limit, an omitted switch is off, and
-the model defaults to 3-DoF joints, one link per segment, no gravity, no magnet-to-magnet
-interaction. coil limits: max_field_t each axis, max_total_field_t the magnitude |B|,
-max_field_change_t each axis between consecutive steps (all T). Obstacles and walls are in
+A backbone schedule (thesis chapter 6; beyond DESIGN.md's keys, which it keeps) replaces the
+path with a coiling target and moves the backbone instead of the body::
+
+    coiling: {radius_m: 0.0075, side: 1}    # straight to the backbone's end, then this arc,
+                                            # towards the base normal (side -1: away)
+    insertion_steps_m: [0.08]               # one for every step, or one each
+    backbone_steps_m: [0.0775, 0.075, ...]  # its reach past the base at each key step
+
+Required: tentacle, insertion_steps_m, and path or coiling (coiling with backbone_steps_m).
+Every other key is optional, and so is each key of coil, model and magnetisation: an omitted
+limit is no limit, an omitted switch is off, and the model defaults to 3-DoF joints, one link
+per segment, no gravity, no magnet-to-magnet interaction. coil limits: max_field_t each
+axis, max_total_field_t the magnitude |B|, max_field_change_t each axis between consecutive
+steps (all T). Obstacles and walls are in
 the rig frame. Unknown keys, missing required ones, wrong types and values out of range are
 refused naming the file and the key.
 

@@ -22,7 +22,7 @@ the links' magnetic moments (link frame), the planner's magnetisation unknowns.
 from dataclasses import dataclass, replace
 
 import numpy as np
-from tentacle_model import planar, spatial, statics, torque_balance
+from tentacle_model import link_loads, planar, spatial, statics, torque_balance
 from tentacle_model.chain import Chain, discretise
 
 DEFAULT_ITERATIONS = 200
@@ -181,11 +181,9 @@ class TentacleModel:
 
     def _evaluate(self, solution, field_t):
         chain = solution.chain
-        pairs = chain.interacting_pairs() if self.dipoles and chain.interacting_pair_count() \
-            else None
-        contact = None if pairs is None else chain.contact_distances(pairs)
         state = spatial.evaluate(chain, solution.state, np.asarray(field_t, dtype=float),
-                                 self.gravity_m_s2, True, None, pairs, contact)
+                                 self.gravity_m_s2, True, None,
+                                 link_loads.of_chain(chain, self.dipoles))
         free = self._free(chain.size)
         return chain, state, free, state.hessian[np.ix_(free, free)]
 

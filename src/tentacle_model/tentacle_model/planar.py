@@ -19,7 +19,7 @@ W_i = (mass distal of link i) + (half of link i's mass).
 
 import numba
 import numpy as np
-from tentacle_model import dipoles
+from tentacle_model import link_loads
 
 
 def loads(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0)):
@@ -153,9 +153,9 @@ def points(chain, theta):
     return chain.base_position_m + planar @ chain.base_rotation[:, :2].T
 
 
-def interaction(chain, theta, pairs, hessian=True, contact_m=None):
+def project_loads(chain, theta, loads, hessian=True):
     """
-    Return (energy J, gradient (n,) N m, Hessian (n, n) or None) of the links' dipole pairs.
+    Return (energy J, gradient (n,) N m, Hessian (n, n) or None) of world-frame link loads.
 
     Link i's world moment is R_base Rz(theta_i) m_i and its centre
     c_i = sum_{j<i} h_j u_j + h_i u_i / 2 with u_j = R_base (cos theta_j, sin theta_j, 0), so
@@ -163,8 +163,8 @@ def interaction(chain, theta, pairs, hessian=True, contact_m=None):
     h_j z x u_j (half of it for j = i); both second derivatives are diagonal in theta
     (z x (z x v) = -v in the plane), and the Hessian is J^T H_xx J plus that diagonal.
 
-    :param contact_m: (p,) how close each pair may come (chain.contact_distances)
-    :raises dipoles.Contact: two interacting magnets closer than that
+    :param loads: link_loads.py callables, e.g. link_loads.of_chain(chain, dipoles=True)
+    :raises dipoles.Contact: two interacting magnets closer than they may come
     """
     n = len(theta)
     c, s = np.cos(theta), np.sin(theta)
@@ -177,7 +177,9 @@ def interaction(chain, theta, pairs, hessian=True, contact_m=None):
     steps = chain.lengths_m[:, None] * u
     joints = np.vstack([np.zeros(3), np.cumsum(steps, axis=0)[:-1]])
     centres = chain.base_position_m + joints + 0.5 * steps
-    loads = dipoles.interaction(moments, centres, pairs, hessian, contact_m)
+    loads = link_loads.total(loads, moments, centres, hessian)
+    if loads is None:
+        return 0.0, np.zeros(n), np.zeros((n, n)) if hessian else None
     z = base[:, 2]
     z_m, z_u = np.cross(z, moments), np.cross(z, u)
     g, f = loads.grad_moments, loads.grad_centres

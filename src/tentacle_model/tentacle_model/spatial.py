@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from tentacle_model import dipoles
+from tentacle_model import link_loads
 
 
 def cross(a, b):
@@ -61,7 +61,7 @@ class Evaluation:
 
 
 def evaluate(chain, q, field_t, gravity_m_s2=(0.0, 0.0, 0.0), hessian=True, levers=None,
-             pairs=None, contact_m=None):
+             loads=()):
     """
     Return the Evaluation of a chain at joint angles q (n, 3), rad.
 
@@ -69,10 +69,9 @@ def evaluate(chain, q, field_t, gravity_m_s2=(0.0, 0.0, 0.0), hessian=True, leve
     :param gravity_m_s2: (3,) gravity, world frame
     :param hessian: also the Hessian (the dominant cost past a few tens of links)
     :param levers: gravity_levers(chain), if the caller already has them
-    :param pairs: (i, j) link pairs whose dipoles interact (chain.interacting_pairs()), or
-        None: the links feel the uniform field only
-    :param contact_m: (p,) how close each pair may come (chain.contact_distances)
-    :raises dipoles.Contact: two interacting magnets closer than that
+    :param loads: world-frame link loads (link_loads.py), e.g. link_loads.of_chain(chain,
+        dipoles=True); () for the uniform field and gravity alone
+    :raises dipoles.Contact: two interacting magnets closer than they may come
     """
     levers = gravity_levers(chain) if levers is None else levers
     out = _evaluate(np.ascontiguousarray(q, dtype=float), chain.base_rotation,
@@ -80,10 +79,10 @@ def evaluate(chain, q, field_t, gravity_m_s2=(0.0, 0.0, 0.0), hessian=True, leve
                     chain.stiffness_n_m, np.asarray(field_t, dtype=float),
                     np.asarray(gravity_m_s2, dtype=float), hessian)
     rotations, axes, points_m, energy_j, grad, hess, distal, torques, largest = out
-    if pairs is not None and len(pairs[0]):
+    if loads:
         moments = (rotations @ chain.moments_a_m2[:, :, None])[:, :, 0]
         centres = points_m[:-1] + 0.5 * chain.lengths_m[:, None] * rotations[:, :, 0]
-        extra = dipoles.interaction(moments, centres, pairs, hessian, contact_m)
+        extra = link_loads.total(loads, moments, centres, hessian)
         d_grad, d_hess = _project_link_loads(axes, points_m[:-1], moments, centres, extra,
                                              hessian)
         energy_j += extra.energy_j

@@ -27,7 +27,7 @@ import time
 import numpy as np
 from scipy.linalg import eigh, eigh_tridiagonal, LinAlgError, solveh_banded
 from scipy.linalg.lapack import dpotrf as potrf, dpotrs as potrs, dptsv as ptsv
-from tentacle_model import planar, spatial
+from tentacle_model import link_loads, planar, spatial
 from tentacle_model.chain import Chain, MAX_CHAIN_LINKS, ProblemTooLarge
 from tentacle_model.dipoles import Contact
 from threadpoolctl import ThreadpoolController
@@ -102,12 +102,12 @@ class Equilibrium:
 class _Planar:
     """Planar chain: x = absolute link angles (n,); linear: small-angle model."""
 
-    def __init__(self, chain, field_t, gravity_m_s2, linear=False, pairs=None):
+    def __init__(self, chain, field_t, gravity_m_s2, linear=False, loads=()):
         self.chain = chain
         self.linear = linear
-        # Interacting dipoles couple every link with every other: a dense Hessian.
-        self.pairs = pairs if pairs is not None and len(pairs[0]) else None
-        self.contact_m = None if self.pairs is None else chain.contact_distances(pairs)
+        # World-frame link loads (interacting dipoles) couple every link with every other:
+        # a dense Hessian.
+        self.loads = tuple(loads)
         self.k = chain.stiffness_n_m[:, 0].copy()
         self.a, self.b = planar.loads(chain, field_t, gravity_m_s2)
         self.load_scale = np.max(np.abs(self.a) + np.abs(self.b))
@@ -121,8 +121,8 @@ class _Planar:
         # A line search's trial is evaluated in full: it is usually the next iterate.
         if x is not self._key:
             u, g, banded = planar.evaluate(x, self.k, self.a, self.b, self.linear, True)
-            if self.pairs is not None:
-                du, dg, _ = planar.interaction(self.chain, x, self.pairs, False, self.contact_m)
+            if self.loads:
+                du, dg, _ = planar.project_loads(self.chain, x, self.loads, False)
                 u, g = u + du, g + dg
             self._key, self._value = x, (u, g, banded)
         return self._value
@@ -136,14 +136,14 @@ class _Planar:
     def dense_hessian(self, x):
         banded = self.evaluate(x)[2]
         h = np.diag(banded[1]) + np.diag(banded[0, 1:], 1) + np.diag(banded[0, 1:], -1)
-        return h + planar.interaction(self.chain, x, self.pairs, True, self.contact_m)[2]
+        return h + planar.project_loads(self.chain, x, self.loads, True)[2]
 
     def torque_scale(self, x):
         return max(self.load_scale, np.abs(self.k * planar.joint_angles(x)).max(),
                    self.k_floor)
 
     def newton_step(self, x, g):
-        if self.pairs is not None:
+        if self.loads:
             return _dense_newton_step(self.dense_hessian(x), g)
         banded = self.evaluate(x)[2]
         diagonal = banded[1]
@@ -164,7 +164,7 @@ class _Planar:
             banded + np.array([[0.0], [shift]]), g, check_finite=False), diagonal, g)
 
     def smallest_eigen(self, x):
-        if self.pairs is not None:
+        if self.loads:
             return _dense_smallest_eigen(self.dense_hessian(x))
         banded = self.evaluate(x)[2]
         diagonal, off = banded[1], banded[0, 1:]
@@ -184,10 +184,9 @@ class _Spatial:
 
     linear = False
 
-    def __init__(self, chain, field_t, gravity_m_s2, pairs=None):
+    def __init__(self, chain, field_t, gravity_m_s2, loads=()):
         self.chain = chain
-        self.field, self.gravity, self.pairs = field_t, gravity_m_s2, pairs
-        self.contact_m = None if pairs is None else chain.contact_distances(pairs)
+        self.field, self.gravity, self.loads = field_t, gravity_m_s2, tuple(loads)
         self.levers = spatial.gravity_levers(chain)
         self.size = 3 * chain.size
         self.k_floor = max(1e-9 * np.max(chain.stiffness_n_m), 1e-300)
@@ -201,7 +200,7 @@ class _Spatial:
         if x is not self._key:
             self._key, self._value = x, spatial.evaluate(
                 self.chain, x.reshape(-1, 3), self.field, self.gravity, True, self.levers,
-                self.pairs, self.contact_m)
+                self.loads)
         return self._value
 
     def energy(self, x):
@@ -228,12 +227,11 @@ class _SpatialLinear:
 
     linear = True
 
-    def __init__(self, chain, field_t, gravity_m_s2, pairs=None):
-        self.chain, self.pairs = chain, pairs
+    def __init__(self, chain, field_t, gravity_m_s2, loads=()):
+        self.chain, self.loads = chain, tuple(loads)
         self.size = 3 * chain.size
         straight = spatial.evaluate(chain, np.zeros((chain.size, 3)), field_t, gravity_m_s2,
-                                    pairs=pairs, contact_m=None if pairs is None else
-                                    chain.contact_distances(pairs))
+                                    loads=loads)
         self.u0, self.g0 = straight.energy_j, straight.gradient.reshape(-1)
         self.h0, self.load_scale = straight.hessian, np.max(np.abs(straight.gradient))
 
@@ -463,19 +461,19 @@ def solve(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=1, initial=None, tol
     deadline = time.monotonic() + time_limit_s
     # Without a pair (one segment) the interaction is nothing: not even the (empty) pair list,
     # which takes n^2 memory to build.
-    pairs = chain.interacting_pairs() if pair_count else None
+    loads = link_loads.of_chain(chain, dipoles)
     if dof == 1:
         if linear and dipoles:
             raise ValueError('the planar linearised model has no dipole interaction: use dof 3')
-        problem = _Planar(chain, field_t, gravity_m_s2, linear, pairs)
+        problem = _Planar(chain, field_t, gravity_m_s2, linear, loads)
     else:
         problem = (_SpatialLinear if linear else _Spatial)(chain, field_t, gravity_m_s2,
-                                                           pairs)
+                                                           loads)
     shape = (n,) if dof == 1 else (n, 3)
     x = np.zeros(shape) if initial is None else np.array(initial, dtype=float)
     if x.shape != shape or not np.all(np.isfinite(x)):
         raise ValueError(f'initial angles must be finite numbers of shape {shape}')
-    dense = dof == 3 or problem.pairs is not None
+    dense = dof == 3 or bool(loads)
     with _blas_threads(problem.size if dense else np.inf):
         try:
             return _solve(problem, x.reshape(-1), shape, tol, max_iterations, time_limit_s,

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from tentacle_model import dipoles, planar
+from tentacle_model import dipoles, link_loads, planar
 from tentacle_model.chain import Chain
 
 
@@ -54,8 +54,9 @@ def test_dipole_interaction_derivatives_match_finite_differences():
                   np.zeros(n), np.zeros(n), rng.normal(size=3), rotation,
                   np.array([0, 0, 1, 1, 2, 3]))
     pairs = chain.interacting_pairs()
+    loads = link_loads.of_chain(chain, dipoles=True)
     theta = rng.uniform(-2, 2, n)
-    energy, grad, hess = planar.interaction(chain, theta, pairs)
+    energy, grad, hess = planar.project_loads(chain, theta, loads)
     # The energy itself, from the world-frame points of planar.points.
     pts = planar.points(chain, theta)
 
@@ -68,12 +69,12 @@ def test_dipole_interaction_derivatives_match_finite_differences():
     assert energy == pytest.approx(reference.energy_j, rel=1e-12, abs=0)
     eps = 1e-4
     eye = np.eye(n)
-    fd_grad = [(planar.interaction(chain, theta + eps * e, pairs, False)[0]
-                - planar.interaction(chain, theta - eps * e, pairs, False)[0]) / (2 * eps)
+    fd_grad = [(planar.project_loads(chain, theta + eps * e, loads, False)[0]
+                - planar.project_loads(chain, theta - eps * e, loads, False)[0]) / (2 * eps)
                for e in eye]
     np.testing.assert_allclose(grad, fd_grad, rtol=1e-6, atol=1e-7 * np.abs(fd_grad).max())
-    fd_hess = np.array([(planar.interaction(chain, theta + eps * e, pairs, False)[1]
-                         - planar.interaction(chain, theta - eps * e, pairs, False)[1])
+    fd_hess = np.array([(planar.project_loads(chain, theta + eps * e, loads, False)[1]
+                         - planar.project_loads(chain, theta - eps * e, loads, False)[1])
                         / (2 * eps) for e in eye])
     np.testing.assert_allclose(hess, fd_hess, rtol=1e-5, atol=1e-6 * np.abs(fd_hess).max())
 

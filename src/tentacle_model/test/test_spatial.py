@@ -4,7 +4,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from tentacle_model import spatial
+from tentacle_model import link_loads, spatial
 from tentacle_model.chain import Chain, discretise
 from tentacle_model.statics import solve
 
@@ -79,12 +79,12 @@ def test_dipole_interaction_derivatives_match_finite_differences(seed):
     chain = dataclasses.replace(chain, moments_a_m2=rng.normal(0, 1e-3, (5, 3)),
                                 stiffness_n_m=1e-3 * chain.stiffness_n_m,
                                 segment_index=np.array([0, 0, 1, 2, 2]))
-    pairs = chain.interacting_pairs()
+    loads = link_loads.of_chain(chain, dipoles=True)
     q = rng.uniform(-1, 1, (5, 3))
     field, gravity = rng.normal(0, 1e-4, 3), np.zeros(3)
 
     def state(q, hessian=False):
-        return spatial.evaluate(chain, q, field, gravity, hessian=hessian, pairs=pairs)
+        return spatial.evaluate(chain, q, field, gravity, hessian=hessian, loads=loads)
 
     plain = spatial.evaluate(chain, q, field, gravity)
     full = state(q, True)

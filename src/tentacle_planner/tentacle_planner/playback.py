@@ -29,7 +29,8 @@ def playback(model, plan, target, step_m, constraints, iterations=50):
     :param plan: a Plan (its directions are held; its key fields start the interpolation)
     :param target: callable (chain, inserted_m) -> (n + 1, 3) follow-the-leader target, m
     :param step_m: insertion between dense steps, m
-    :param constraints: Constraints (field limits apply at every dense step)
+    :param constraints: Constraints (field limits apply at every dense step; a field change
+        over max_field_change_t between consecutive dense steps is flagged)
     :param iterations: Gauss-Newton budget per dense step
     """
     key_m = np.array([s.inserted_m for s in plan.steps])
@@ -47,5 +48,10 @@ def playback(model, plan, target, step_m, constraints, iterations=50):
             flags.append(f'dense step at {inserted_m * 1e3:.1f} mm did not converge')
         elif not step.stability > 0:
             flags.append(f'unstable dense step at {inserted_m * 1e3:.1f} mm')
+        change = constraints.max_field_change_t
+        if change is not None and steps[:-1] and np.max(
+                np.abs(step.field_t - steps[-2].field_t)) > change * (1 + 1e-6):
+            flags.append(f'field change over the limit into the dense step at '
+                         f'{inserted_m * 1e3:.1f} mm')
         start = (solution.state, inserted_m)
     return steps, flags

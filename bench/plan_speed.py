@@ -16,7 +16,6 @@ Run: .venv/bin/python bench/plan_speed.py [--quick]
 """
 
 import argparse
-import os
 import pathlib
 import statistics
 import sys
@@ -140,5 +139,4 @@ def main():
 
 
 if __name__ == '__main__':
-    os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
     main()

@@ -31,6 +31,12 @@ def known_plan(spec, dof, constraints, seed=3):
     return model, x, [s.points_m for s in solutions]
 
 
+def central_gradient(problem, x, h):
+    """Return the central-difference gradient of problem.objective at x."""
+    return np.array([(problem.objective(x + e)[0] - problem.objective(x - e)[0]) / (2 * h)
+                     for e in np.eye(len(x)) * h])
+
+
 @pytest.mark.parametrize('dof', [1, 3])
 def test_the_gradient_is_exact(braided, dof):
     constraints = Constraints(planar_magnetisation=dof == 1)
@@ -39,9 +45,7 @@ def test_the_gradient_is_exact(braided, dof):
     x = np.random.default_rng(7).uniform(-1.0, 1.0, problem.size)
     value, gradient = problem.objective(x)
     assert value > 1e-4
-    h = 1e-6
-    fd = np.array([(problem.objective(x + e)[0] - problem.objective(x - e)[0]) / (2 * h)
-                   for e in np.eye(problem.size) * h])
+    fd = central_gradient(problem, x, 1e-6)
     assert gradient == pytest.approx(fd, abs=1e-6 * np.abs(fd).max())
 
 
@@ -58,9 +62,7 @@ def test_the_stability_penalty_and_its_gradient(braided, dof):
     expected = sum((STABILITY_WEIGHT * (1 - m / 50.0)) ** 2 for m in margins)
     value, gradient = strict.objective(x)
     assert value == pytest.approx(expected, rel=1e-9)
-    h = 1e-4
-    fd = np.array([(strict.objective(x + e)[0] - strict.objective(x - e)[0]) / (2 * h)
-                   for e in np.eye(strict.size) * h])
+    fd = central_gradient(strict, x, 1e-4)
     assert gradient == pytest.approx(fd, abs=2e-3 * np.abs(fd).max())
 
 
@@ -138,9 +140,7 @@ def test_the_torque_balance_stage_is_zero_at_an_equilibrium_and_its_gradient_exa
     x = np.random.default_rng(5).uniform(-1.0, 1.0, balance.size)
     value, gradient = balance.objective(x)
     assert value > 1e-3
-    h = 1e-6
-    fd = np.array([(balance.objective(x + e)[0] - balance.objective(x - e)[0]) / (2 * h)
-                   for e in np.eye(balance.size) * h])
+    fd = central_gradient(balance, x, 1e-6)
     assert gradient == pytest.approx(fd, abs=1e-6 * np.abs(fd).max())
 
 

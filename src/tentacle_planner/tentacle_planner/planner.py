@@ -82,7 +82,7 @@ def shape_rms(scene, steps):
 
 def step_clearance(scene, step):
     """Return (gap, what): how far a Step's body keeps off the scene's obstacles, m."""
-    chain = scene.tentacle_model(dipoles=False).chain(step.inserted_m)
+    chain = discretise(scene.tentacle, step.inserted_m, scene.model.sublinks)
     radii = [scene.tentacle.segments[i].radius_m for i in chain.segment_index]
     return clearance(step.points_m, radii, scene.obstacles, scene.walls)
 

@@ -3,9 +3,10 @@ A device behind a pseudo-terminal: the line, its pacing, faults and the log ever
 
 A request counts as received only when its bytes would have crossed the line at the
 configured baud (10 bits per byte); the device takes ``delay_s`` to process it, and its reply
-is paced at the same rate. Line faults can be armed while running (``inject``): ``no_reply``,
-``garble``, ``late`` (each for the next ``count`` requests, optionally only those a device
-says match) and ``disconnect`` (the port vanishes for ``duration_s``, as an unplugged USB
+is paced at the same rate. Line faults can be armed while running (``inject``): ``no_reply``
+(the request is lost), ``drop_reply`` (it is obeyed, its answer lost), ``garble``, ``late``
+(each for the next ``count`` requests, optionally only those a device says match) and
+``disconnect`` (the port vanishes for ``duration_s``, as an unplugged USB
 adapter does, then comes back under the same path). Every received request is logged with
 its arrival time, bytes and meaning, in memory and optionally as JSON lines in a file, so
 tests can check exactly what reached the wire.
@@ -22,12 +23,14 @@ import threading
 import time
 import tty
 
+POLL_S = 0.005  # how often the device thread looks for bytes, and for what it sends itself
+
 
 class PtyDevice:
     """A pty, a device thread, line pacing, fault injection and the received-request log."""
 
-    FAULT_KINDS = ('no_reply', 'garble', 'late', 'disconnect')
-    REQUEST_FAULTS = ('no_reply', 'nak', 'garble', 'late')  # armed per request, in this order
+    FAULT_KINDS = ('no_reply', 'drop_reply', 'garble', 'late', 'disconnect')
+    REQUEST_FAULTS = ('no_reply', 'drop_reply', 'nak', 'garble', 'late')  # in this order
 
     def __init__(self, name, *, baud=9600, link_path=None, delay_s=0.0005, log_path=None):
         """
@@ -80,6 +83,10 @@ class PtyDevice:
     def matches(self, request, match):
         """Return whether an armed fault with this match applies to the request."""
         return match is None
+
+    def poll(self):
+        """Return bytes the device sends of its own accord now (a deferred reply), or None."""
+        return None
 
     # -- life cycle -------------------------------------------------------------------------
     @property
@@ -177,8 +184,11 @@ class PtyDevice:
                 with self._lock:
                     self._reconnect_at = None
                 self._open_pty()
+            unsolicited = self.poll()
+            if unsolicited:
+                self._send(unsolicited)
             try:
-                readable, _, _ = select.select([self._master], [], [], 0.02)
+                readable, _, _ = select.select([self._master], [], [], POLL_S)
                 if not readable:
                     continue
                 chunk = os.read(self._master, 4096)
@@ -231,12 +241,15 @@ class PtyDevice:
         self._record(request, arrived, meaning)
         if fault == 'nak':
             reply = self.refusal()
-        if fault == 'no_reply' or reply is None:
+        if fault in ('no_reply', 'drop_reply') or reply is None:
             return
         if fault == 'garble':
             reply = self.garble(reply)
-        time.sleep(self.delay_s + (late_s if fault == 'late' else 0.0)
-                   + len(reply) * self.byte_s)
+        self._send(reply, self.delay_s + (late_s if fault == 'late' else 0.0))
+
+    def _send(self, reply, delay_s=0.0):
+        """Write reply bytes after delay_s and their time on the line."""
+        time.sleep(delay_s + len(reply) * self.byte_s)
         try:
             os.write(self._master, reply)
         except (OSError, TypeError):

@@ -39,20 +39,8 @@ def read_line(fd, timeout_s=1.0):
 
 
 @pytest.fixture
-def device(tmp_path):
-    made = []
-
-    def make(**kwargs):
-        dev = ShoutDevice('s', link_path=str(tmp_path / 's'), log_path=str(tmp_path / 's.log'),
-                          **kwargs).start()
-        fd = os.open(dev.port, os.O_RDWR | os.O_NOCTTY)
-        tty.setraw(fd)
-        made.append((dev, fd))
-        return dev, fd
-    yield make
-    for dev, fd in made:
-        os.close(fd)
-        dev.stop()
+def device(on_pty, tmp_path):
+    return lambda **kwargs: on_pty(ShoutDevice, 's', log_path=str(tmp_path / 's.log'), **kwargs)
 
 
 def test_a_request_is_paced_answered_and_logged(device, tmp_path):

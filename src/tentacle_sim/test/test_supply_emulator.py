@@ -28,22 +28,9 @@ def exchange(fd, request, reply_len=None, timeout_s=1.0):
 
 
 @pytest.fixture
-def open_port(tmp_path):
-    opened = []
-
-    def make(dialect, **kwargs):
-        emu = EmulatedSupply('x', dialect, link_path=str(tmp_path / 'x'),
-                             log_path=str(tmp_path / 'x.jsonl'), **kwargs).start()
-        import tty
-        fd = os.open(emu.port, os.O_RDWR | os.O_NOCTTY)
-        tty.setraw(fd)
-        opened.append((emu, fd))
-        return emu, fd
-
-    yield make
-    for emu, fd in opened:
-        os.close(fd)
-        emu.stop()
+def open_port(on_pty, tmp_path):
+    return lambda dialect, **kwargs: on_pty(EmulatedSupply, 'x', dialect,
+                                            log_path=str(tmp_path / 'x.jsonl'), **kwargs)
 
 
 def test_dxkdp_set_is_acked_and_paced_at_baud(open_port):

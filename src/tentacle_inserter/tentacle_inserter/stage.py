@@ -1,0 +1,190 @@
+"""
+One linear axis on a serial line: checked targets, supervised moves, a stop that holds.
+
+``GcodeStage`` drives a Marlin-style firmware (gcode.py) and ``Step1mmStage`` the reference
+rig's inserter (step1mm.py); both keep positions in metres and refuse, before anything is
+sent, a target that is not finite or is outside [0, max_length]. A gcode move is absolute
+(re-sending it after a lost ``ok`` cannot move the axis twice) and supervised: it must end
+within its trapezoid's time (trapezoid.py) times ``time_margin`` plus ``slack_s``, or the
+axis is stopped (M112, then M999) and the position read back from the device, never assumed.
+
+A firmware counts steps from where it started: after a connect (a board resets when its
+USB line opens) or a halt and reset its count says nothing of where the axis is. So a gcode
+axis starts unhomed and refuses moves until ``home()`` (there are no end stops: home is
+"zero is here", G92 E0); a stop unhomes it again. No target is ever replayed. A step1mm axis
+has no reply and no readback: its position is counted, and says so (``measured``).
+"""
+
+import math
+
+from tentacle_common.attempts import Attempts
+from tentacle_common.errors import DriverError, Refused, ReplyTimeout
+from tentacle_inserter import gcode, step1mm
+from tentacle_inserter.trapezoid import move_time_s
+
+
+class TargetRefused(DriverError):
+    """A target was refused before it reached the wire: not finite, or out of range."""
+
+
+class MoveFailed(DriverError):
+    """A move did not finish in its time (stall, slip, lost reply): the axis was stopped."""
+
+
+class NotHomed(DriverError):
+    """A move was asked of an axis whose zero is not known (after a connect or a stop)."""
+
+
+def check_target(target_m, max_length_m):
+    """
+    Return target_m as a float if it is a position the axis may go to.
+
+    :raises TargetRefused: not a number, not finite, or outside [0, max_length_m], saying which
+    """
+    try:
+        value = float(target_m)
+    except (TypeError, ValueError):
+        raise TargetRefused(f'target {target_m!r} is not a number') from None
+    if not math.isfinite(value):
+        raise TargetRefused(f'target {value} is not finite')
+    if not 0.0 <= value <= max_length_m:
+        raise TargetRefused(f'target {value:.6g} m is outside [0, {max_length_m:g}] m')
+    return value
+
+
+class GcodeStage:
+    """A Marlin-style stage on the E axis, positions in metres."""
+
+    measured = True  # M114 reads the position back
+
+    def __init__(self, line, *, max_length_m, max_speed_m_s, accel_m_s2, steps_per_mm,
+                 reply_timeout_s=0.5, retries=2, time_margin=1.5, slack_s=0.5):
+        """
+        Bind to a line (a SerialLine); ``connect()`` talks to the firmware.
+
+        :param max_length_m: soft limit: targets in [0, max_length_m]
+        :param max_speed_m_s: every move's speed
+        :param accel_m_s2: the firmware's acceleration (its setting: the expected times)
+        :param steps_per_mm: calibration sent with M92 at connect
+        :param reply_timeout_s: longest wait for a reply to a command (not for motion)
+        :param time_margin, slack_s: a move may take its trapezoid's time x time_margin +
+            slack_s before it is called stalled
+        """
+        self.line = line
+        self.max_length_m, self.max_speed_m_s = float(max_length_m), float(max_speed_m_s)
+        self.accel_m_s2, self.steps_per_mm = float(accel_m_s2), float(steps_per_mm)
+        self.reply_timeout_s = float(reply_timeout_s)
+        self.time_margin, self.slack_s = float(time_margin), float(slack_s)
+        self.attempts = Attempts(line, retries=retries, max_turnaround_s=reply_timeout_s)
+        self.position_m = None  # as last read back (None: unknown)
+        self.homed = False
+
+    # -- exchanges --------------------------------------------------------------------------
+    def _exchange(self, request, timeout_s):
+        """Send one line; return the lines before its ``ok`` (raise Refused on Error:)."""
+        self.line.write(request)
+        deadline = self.line.now() + timeout_s
+        lines = []
+        while True:
+            kind, value = gcode.parse_reply(self.line.read_until(gcode.TERMINATOR, deadline))
+            if kind == 'ok':
+                return lines
+            if kind == 'error':
+                raise Refused(f'{request.decode().strip()}: {value}')
+            lines.append((kind, value))
+
+    def _command(self, request):
+        """Return _exchange's lines, with the retries of Attempts (commands are idempotent)."""
+        return self.attempts.run(request.decode().strip(),
+                                 lambda: self._exchange(request, self.reply_timeout_s))
+
+    def read_position(self):
+        """Return the position the firmware reports (M114), m; remember it."""
+        for kind, value in self._command(gcode.report_position()):
+            if kind == 'position':
+                self.position_m = value
+                return value
+        raise Refused('M114: no position line')
+
+    # -- life cycle -------------------------------------------------------------------------
+    def connect(self):
+        """Open the line, set absolute mode and the calibration, read the position back."""
+        self.line.open()
+        self.attempts.resync()
+        self._command(gcode.absolute())
+        self._command(gcode.steps_per_mm(self.steps_per_mm))
+        self.homed = False
+        return self.read_position()
+
+    def home(self):
+        """Call where the axis stands zero (G92 E0): it may move from now on."""
+        self._command(gcode.set_position(0.0))
+        self.homed = True
+        return self.read_position()
+
+    def move_to(self, target_m):
+        """
+        Move to target_m (m) and wait until the axis is there; return the position read back.
+
+        :raises TargetRefused: before anything is sent (check_target)
+        :raises NotHomed: before anything is sent: home() first
+        :raises MoveFailed: it did not end in time: the axis was stopped, position read back
+        """
+        target = check_target(target_m, self.max_length_m)
+        if not self.homed:
+            raise NotHomed('the axis is not homed (after a connect or a stop): home it first')
+        start = self.position_m if self.position_m is not None else self.read_position()
+        allowed = (move_time_s(target - start, self.max_speed_m_s, self.accel_m_s2)
+                   * self.time_margin + self.slack_s)
+        self._command(gcode.move(target, self.max_speed_m_s))
+        self.position_m = None  # moving: unknown until read back
+        try:  # once: a stalled move is not waited for twice
+            self._exchange(gcode.wait_for_motion(), allowed)
+        except (ReplyTimeout, Refused) as exc:
+            self.stop()
+            raise MoveFailed(f'move to {target * 1e3:.3f} mm did not finish in {allowed:.2f} s'
+                             f' ({exc}): the axis is stopped and must be homed again') from None
+        return self.read_position()
+
+    def stop(self):
+        """Halt at once (M112), reset (M999), read the count back; unhome; return it (m)."""
+        self.line.write(gcode.halt())   # Marlin answers nothing to M112
+        self.homed = False
+        self.attempts.out_of_step = True  # drop whatever a halted firmware still says
+        self._command(gcode.reset())
+        return self.read_position()
+
+
+class Step1mmStage:
+    """The reference rig's inserter: a character per 1 mm, no reply; a counted position."""
+
+    measured = False  # no readback: the position is counted
+
+    def __init__(self, line, *, max_length_m, mapping=step1mm.Mapping(), start_m=0.0):
+        """Bind to a line; the position is counted from start_m (m)."""
+        self.line, self.max_length_m, self.mapping = line, float(max_length_m), mapping
+        self.position_m = float(start_m)
+
+    def connect(self):
+        """Open the line and stop whatever may be going on."""
+        self.line.open()
+        self.line.write(self.mapping.command(0))
+        return self.position_m
+
+    def move_to(self, target_m):
+        """
+        Send the 1 mm steps towards target_m (rounded to whole mm); return the counted position.
+
+        :raises TargetRefused: before anything is sent
+        """
+        target = check_target(target_m, self.max_length_m)
+        steps = round((target - self.position_m) / step1mm.STEP_M)
+        if steps:
+            self.line.write(self.mapping.command(1 if steps > 0 else -1) * abs(steps))
+            self.position_m += steps * step1mm.STEP_M
+        return self.position_m
+
+    def stop(self):
+        """Send the stop character; return the counted position (what was sent, not done)."""
+        self.line.write(self.mapping.command(0))
+        return self.position_m

@@ -148,6 +148,14 @@ class SerialLine:
         del self._rx[:n_bytes]
         return out
 
+    def wait_input(self, deadline):
+        """
+        Return True once input is buffered (none of it taken), False at the deadline.
+
+        :raises LinkLost: the port failed
+        """
+        return bool(self._rx) or self._fill(deadline)
+
     def read_until(self, terminator, deadline, max_bytes=256):
         """
         Return the bytes up to and including terminator.

@@ -22,6 +22,8 @@ from tentacle_common.errors import DriverError, Refused, ReplyTimeout
 from tentacle_inserter import gcode, step1mm
 from tentacle_inserter.trapezoid import move_time_s
 
+POLL_S = 0.01  # how often a waiting move looks whether it was cancelled (s)
+
 
 class TargetRefused(DriverError):
     """A target was refused before it reached the wire: not finite, or out of range."""
@@ -33,6 +35,10 @@ class MoveFailed(DriverError):
 
 class NotHomed(DriverError):
     """A move was asked of an axis whose zero is not known (after a connect or a stop)."""
+
+
+class MoveStopped(DriverError):
+    """A move was cut short by a stop: the axis was halted, and must be homed again."""
 
 
 def check_target(target_m, max_length_m):
@@ -122,13 +128,15 @@ class GcodeStage:
         self.homed = True
         return self.read_position()
 
-    def move_to(self, target_m):
+    def move_to(self, target_m, cancelled=lambda: False):
         """
         Move to target_m (m) and wait until the axis is there; return the position read back.
 
+        :param cancelled: polled every POLL_S while the axis moves; True stops it at once
         :raises TargetRefused: before anything is sent (check_target)
         :raises NotHomed: before anything is sent: home() first
         :raises MoveFailed: it did not end in time: the axis was stopped, position read back
+        :raises MoveStopped: cancelled: the axis was stopped (stop())
         """
         target = check_target(target_m, self.max_length_m)
         if not self.homed:
@@ -139,12 +147,31 @@ class GcodeStage:
         self._command(gcode.move(target, self.max_speed_m_s))
         self.position_m = None  # moving: unknown until read back
         try:  # once: a stalled move is not waited for twice
-            self._exchange(gcode.wait_for_motion(), allowed)
+            if not self._wait_for_motion(allowed, cancelled):
+                self.stop()
+                raise MoveStopped(f'move to {target * 1e3:.3f} mm stopped: the axis must be '
+                                  'homed again')
         except (ReplyTimeout, Refused) as exc:
             self.stop()
             raise MoveFailed(f'move to {target * 1e3:.3f} mm did not finish in {allowed:.2f} s'
                              f' ({exc}): the axis is stopped and must be homed again') from None
         return self.read_position()
+
+    def _wait_for_motion(self, allowed_s, cancelled):
+        """Send M400; return True at its ok, False once cancelled (ReplyTimeout past allowed)."""
+        self.line.write(gcode.wait_for_motion())
+        deadline = self.line.now() + allowed_s
+        while not cancelled():
+            if self.line.wait_input(min(deadline, self.line.now() + POLL_S)):
+                kind, value = gcode.parse_reply(self.line.read_until(gcode.TERMINATOR,
+                                                                     deadline))
+                if kind == 'ok':
+                    return True
+                if kind == 'error':
+                    raise Refused(f'M400: {value}')
+            elif self.line.now() >= deadline:
+                raise ReplyTimeout(f'no ok to M400 in {allowed_s:.2f} s')
+        return False
 
     def stop(self):
         """Halt at once (M112), reset (M999), read the count back; unhome; return it (m)."""
@@ -171,9 +198,16 @@ class Step1mmStage:
         self.line.write(self.mapping.command(0))
         return self.position_m
 
-    def move_to(self, target_m):
+    def home(self):
+        """Count from zero here; return 0."""
+        self.position_m = 0.0
+        return self.position_m
+
+    def move_to(self, target_m, cancelled=None):
         """
         Send the 1 mm steps towards target_m (rounded to whole mm); return the counted position.
+
+        Nothing comes back to wait for: the characters are sent at once (cancelled unused).
 
         :raises TargetRefused: before anything is sent
         """

@@ -1,0 +1,171 @@
+"""
+One axis driven from a thread of its own: the latest target, with stop and estop first.
+
+The node (inserter_node) and lab scripts reach an axis through this. ``set_target`` checks a
+target at once (TargetRefused, nothing sent) and hands it to the worker, which moves to the
+latest only: a target that arrives while the axis moves replaces any not yet started, and
+none is replayed after a fault or a reconnect. ``stop`` and ``set_estop(True)`` cut a move
+short at once (the driver's cancelled poll: M112, then M999); while the estop holds no
+target is taken. A lost line is reopened every ``reconnect_s`` and the axis comes back
+unhomed, its position read back, never assumed. ``snapshot()`` is what /<axis>/state and
+/diagnostics publish.
+"""
+
+import threading
+
+from tentacle_common.errors import DriverError, LinkLost
+from tentacle_inserter.stage import check_target, TargetRefused
+
+HOME_TIMEOUT_S = 10.0
+
+
+class AxisWorker:
+    """A stage driver (stage.GcodeStage or Step1mmStage) owned by one thread."""
+
+    def __init__(self, stage, *, reconnect_s=1.0):
+        """Take a driver not yet connected; ``start()`` runs the thread."""
+        self.stage, self.reconnect_s = stage, float(reconnect_s)
+        self._cond = threading.Condition()
+        self._target = None         # the latest target not yet started, m
+        self._stop = False          # a stop asked for and not yet done
+        self._home = None           # a threading.Event while a home is asked for
+        self._home_result = (False, '')
+        self._estop = False
+        self._shutdown = False
+        self._moving = False
+        self.connected = False
+        self.error = ''             # the last fault, '' after a good move
+        self.moves = self.refusals = 0
+        self._thread = threading.Thread(target=self._run, name='axis-worker', daemon=True)
+
+    # -- what callers do --------------------------------------------------------------------
+    def start(self):
+        """Start the worker (it connects, then waits for work)."""
+        self._thread.start()
+        return self
+
+    def set_target(self, target_m):
+        """
+        Hand a target (m) to the worker; it replaces any not yet started.
+
+        :raises TargetRefused: not finite, out of range, or the estop holds (nothing sent)
+        """
+        try:
+            target = check_target(target_m, self.stage.max_length_m)
+            with self._cond:
+                if self._estop:
+                    raise TargetRefused('estop active: no motion until it is released')
+                self._target = target
+                self._cond.notify_all()
+        except TargetRefused:
+            self.refusals += 1
+            raise
+
+    def stop(self):
+        """Stop now: drop the pending target and cut the move short."""
+        with self._cond:
+            self._target, self._stop = None, True
+            self._cond.notify_all()
+
+    def set_estop(self, active):
+        """Engage (stop, and refuse targets until released) or release the estop."""
+        with self._cond:
+            self._estop = bool(active)
+            if self._estop:
+                self._target, self._stop = None, True
+            self._cond.notify_all()
+
+    def home(self, timeout_s=HOME_TIMEOUT_S):
+        """Make where the axis stands its zero; return (success, message)."""
+        with self._cond:
+            if self._estop:
+                return False, 'estop active'
+            done = self._home = threading.Event()
+            self._cond.notify_all()
+        if not done.wait(timeout_s):
+            return False, f'no answer in {timeout_s:g} s'
+        return self._home_result
+
+    def snapshot(self):
+        """Return the state to publish: position (m), moving, homed, connected, faults."""
+        with self._cond:
+            return {'position_m': self.stage.position_m, 'moving': self._moving,
+                    'homed': getattr(self.stage, 'homed', True), 'connected': self.connected,
+                    'measured': self.stage.measured, 'estop': self._estop,
+                    'error': self.error, 'moves': self.moves, 'refusals': self.refusals}
+
+    def shutdown(self, timeout_s=5.0):
+        """Stop the axis, close the line, end the thread."""
+        with self._cond:
+            self._shutdown, self._target, self._stop = True, None, True
+            self._cond.notify_all()
+        self._thread.join(timeout_s)
+
+    # -- the thread -------------------------------------------------------------------------
+    def _cancelled(self):
+        with self._cond:
+            return self._stop or self._shutdown
+
+    def _run(self):
+        while True:
+            with self._cond:
+                if self._shutdown:
+                    break
+            if not self.connected:
+                self._connect()
+                continue
+            with self._cond:
+                self._cond.wait_for(lambda: self._shutdown or self._stop or self._home
+                                    or self._target is not None, timeout=0.5)
+                stop, home, target = self._stop, self._home, self._target
+                self._stop, self._home, self._target = False, None, None
+                self._moving = target is not None and not stop
+            try:
+                if stop:
+                    self.stage.stop()
+                elif home is not None:
+                    self.stage.home()
+                    self._home_result = (True, 'zero is here')
+                    home.set()
+                elif target is not None:
+                    self.stage.move_to(target, cancelled=self._cancelled)
+                    self.moves += 1
+                    self.error = ''
+            except LinkLost as exc:
+                self._lost(exc, home)
+            except DriverError as exc:
+                self.error = str(exc)
+                if home is not None:
+                    self._home_result = (False, str(exc))
+                    home.set()
+            finally:
+                with self._cond:
+                    self._moving = False
+        self._close()
+
+    def _connect(self):
+        try:
+            self.stage.connect()
+            self.connected, self.error = True, ''
+        except (LinkLost, DriverError) as exc:
+            self.error = f'connect: {exc}'
+            self.stage.line.close()
+            with self._cond:
+                self._cond.wait_for(lambda: self._shutdown, timeout=self.reconnect_s)
+
+    def _lost(self, exc, home):
+        self.connected, self.error = False, f'line lost: {exc}'
+        self.stage.line.close()
+        with self._cond:
+            self._target = None  # a target from before the loss is never replayed
+        if home is not None:
+            self._home_result = (False, self.error)
+            home.set()
+
+    def _close(self):
+        try:
+            if self.connected:
+                self.stage.stop()
+        except DriverError:
+            pass  # the line is gone: the firmware stops on its own at the end of the move
+        self.stage.line.close()

@@ -1,0 +1,92 @@
+"""The axis worker against the gcode emulator: latest target, stop, estop, a lost line."""
+
+import time
+
+import pytest
+from tentacle_common.serial_line import SerialLine
+from tentacle_inserter import stage
+from tentacle_inserter.axis_worker import AxisWorker
+from tentacle_sim.stage_emulator import GcodeStage
+
+SPEED, ACCEL = 0.01, 0.5
+
+
+def wait_for(condition, timeout_s=5.0):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.01)
+    return False
+
+
+@pytest.fixture
+def worker(tmp_path):
+    link = str(tmp_path / 'stage')
+    emu = GcodeStage('e', link_path=link, accel_m_s2=ACCEL).start()
+    axis = stage.GcodeStage(SerialLine(link, 115200), max_length_m=0.05, max_speed_m_s=SPEED,
+                            accel_m_s2=ACCEL, steps_per_mm=100.0, reply_timeout_s=0.2)
+    w = AxisWorker(axis, reconnect_s=0.2).start()
+    assert wait_for(lambda: w.connected)
+    assert w.home() == (True, 'zero is here')
+    yield w, emu
+    w.shutdown()
+    emu.stop()
+
+
+def targets_sent(emu):
+    return [round(e['E'], 3) for e in emu.log if e.get('command') == 'G1']
+
+
+def test_the_latest_target_wins_and_none_is_replayed(worker):
+    w, emu = worker
+    w.set_target(0.010)
+    assert wait_for(lambda: emu.state()['moving'])
+    w.set_target(0.020)          # replaced before it started
+    w.set_target(0.030)
+    assert wait_for(lambda: w.moves == 2 and not w.snapshot()['moving'], 10.0)
+    assert targets_sent(emu) == [10.0, 30.0]
+    assert emu.state()['position_m'] == pytest.approx(0.030, abs=1e-5)
+    assert w.snapshot()['position_m'] == pytest.approx(0.030, abs=1e-5)
+
+
+def test_stop_cuts_a_move_short_at_once(worker):
+    w, emu = worker
+    w.set_target(0.030)
+    assert wait_for(lambda: emu.state()['moving'])
+    t0 = time.monotonic()
+    w.stop()
+    assert wait_for(lambda: not emu.state()['moving'], 0.5)
+    assert time.monotonic() - t0 < 0.1     # the worker's poll, then M112 on the line
+    assert wait_for(lambda: 'stopped' in w.snapshot()['error'])
+    assert not w.snapshot()['homed']
+    assert emu.state()['position_m'] < 0.03
+
+
+def test_the_estop_halts_and_holds_until_released(worker):
+    w, emu = worker
+    w.set_target(0.030)
+    assert wait_for(lambda: emu.state()['moving'])
+    w.set_estop(True)
+    assert wait_for(lambda: not emu.state()['moving'], 0.5)
+    with pytest.raises(stage.TargetRefused, match='estop active'):
+        w.set_target(0.001)
+    assert w.home() == (False, 'estop active')
+    time.sleep(0.3)
+    assert not emu.state()['moving'] and targets_sent(emu) == [30.0]
+    w.set_estop(False)
+    assert w.home()[0]
+    w.set_target(0.001)
+    assert wait_for(lambda: w.moves == 1)
+
+
+def test_a_lost_line_reconnects_unhomed_and_replays_nothing(worker):
+    w, emu = worker
+    emu.inject('disconnect', duration_s=0.5)
+    assert wait_for(lambda: not emu.state()['connected'], 1.0)
+    w.set_target(0.005)          # taken, then lost with the line
+    assert wait_for(lambda: not w.connected, 2.0)
+    assert wait_for(lambda: w.connected, 3.0)
+    assert not w.snapshot()['homed']
+    time.sleep(0.3)
+    assert targets_sent(emu) == []

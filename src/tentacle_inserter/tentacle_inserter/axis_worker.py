@@ -14,7 +14,7 @@ unhomed, its position read back, never assumed. ``snapshot()`` is what /<axis>/s
 import threading
 
 from tentacle_common.errors import DriverError, LinkLost
-from tentacle_inserter.stage import check_target, TargetRefused
+from tentacle_inserter.stage import check_target, MoveStopped, TargetRefused
 
 HOME_TIMEOUT_S = 10.0
 
@@ -36,6 +36,7 @@ class AxisWorker:
         self.connected = False
         self.error = ''             # the last fault, '' after a good move
         self.moves = self.refusals = 0
+        self.stopped = False        # the stop at shutdown was answered by the stage
         self._thread = threading.Thread(target=self._run, name='axis-worker', daemon=True)
 
     # -- what callers do --------------------------------------------------------------------
@@ -95,11 +96,12 @@ class AxisWorker:
                     'error': self.error, 'moves': self.moves, 'refusals': self.refusals}
 
     def shutdown(self, timeout_s=5.0):
-        """Stop the axis, close the line, end the thread."""
+        """Stop the axis, close the line, end the thread; return whether the stop was answered."""
         with self._cond:
             self._shutdown, self._target, self._stop = True, None, True
             self._cond.notify_all()
         self._thread.join(timeout_s)
+        return self.stopped
 
     # -- the thread -------------------------------------------------------------------------
     def _cancelled(self):
@@ -123,14 +125,18 @@ class AxisWorker:
             try:
                 if stop:
                     self.stage.stop()
-                elif home is not None:
+                if home is not None:  # a home asked for with (or after) a stop still happens
                     self.stage.home()
-                    self._home_result = (True, 'zero is here')
+                    self._home_result, self.error = (True, 'zero is here'), ''
                     home.set()
                 elif target is not None:
                     self.stage.move_to(target, cancelled=self._cancelled)
                     self.moves += 1
                     self.error = ''
+            except MoveStopped as exc:
+                self.error = str(exc)
+                with self._cond:
+                    self._stop = False  # the stop that cut the move short is done
             except LinkLost as exc:
                 self._lost(exc, home)
             except DriverError as exc:
@@ -166,6 +172,7 @@ class AxisWorker:
         try:
             if self.connected:
                 self.stage.stop()
-        except DriverError:
-            pass  # the line is gone: the firmware stops on its own at the end of the move
+                self.stopped = self.stage.measured  # a step1mm stop is sent, never confirmed
+        except DriverError as exc:
+            self.error = f'stop at shutdown: {exc}'
         self.stage.line.close()

@@ -1,22 +1,172 @@
 """
-Drive the linear insertion stage (/inserter/target, /inserter/state): not built yet.
+inserter_node: one linear axis (the inserter, or the backbone stage) on a serial line.
 
-The executable exists so the package installs and the ament index lists it; a later issue
-fills it. Running it says so and exits non-zero rather than pretending to work.
+Topics under the axis namespace (parameter ``axis``, DESIGN.md): /<axis>/target
+(std_msgs/Float64, absolute position, m), /<axis>/state (sensor_msgs/JointState: position m,
+velocity m/s, at ``state_rate``), /<axis>/stop and /<axis>/home (std_srvs/Trigger), /estop
+(std_msgs/Bool, transient local) honoured, /diagnostics. A target that is not finite or is
+outside [0, max_length] is refused with a logged reason and never reaches the wire; the
+axis moves to the latest target only, a move that does not end in its expected time stops
+the axis, and after a stop or a lost line it must be homed again (home: "zero is here").
+A step1mm axis reports a counted position: /diagnostics says it is estimated. The axis logic
+is tentacle_inserter.axis_worker and stage (no rclpy); this module is the ROS glue.
 """
 
-import argparse
+import math
 import sys
+
+from diagnostic_msgs.msg import DiagnosticArray
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool, Float64
+from std_srvs.srv import Trigger
+from tentacle_common.driver_node import (declare_parameters, diagnostic_status,
+                                         ignore_further_signals, init_checked,
+                                         spin_until_signal, wants_help)
+from tentacle_common.errors import ConfigError, DriverError
+from tentacle_common.serial_line import SerialLine
+from tentacle_inserter import stage, step1mm
+from tentacle_inserter.axis_worker import AxisWorker
+from tentacle_inserter.params import describe, INSERTER_PARAMS, NODE_NAME
+
+
+def make_stage(p):
+    """Return the axis driver the parameters describe (not connected)."""
+    line = SerialLine(p['port'], p['baud'])
+    if p['dialect'] == 'gcode':
+        return stage.GcodeStage(line, max_length_m=p['max_length'], max_speed_m_s=p['max_speed'],
+                                accel_m_s2=p['acceleration'], steps_per_mm=p['steps_per_mm'],
+                                reply_timeout_s=p['reply_timeout_s'], retries=p['retries'],
+                                time_margin=p['time_margin'], slack_s=p['slack_s'])
+    if p['dialect'] == 'step1mm':
+        mapping = step1mm.Mapping(p['step1mm_extend'], p['step1mm_retract'], p['step1mm_stop'])
+        return stage.Step1mmStage(line, max_length_m=p['max_length'], mapping=mapping)
+    raise ConfigError(f"dialect {p['dialect']!r} is not gcode or step1mm")
+
+
+class InserterNode(Node):
+    """The ROS side of one axis."""
+
+    def __init__(self):
+        """Declare the parameters, start the axis worker, wire topics and services."""
+        super().__init__(NODE_NAME)
+        p = declare_parameters(self, INSERTER_PARAMS)
+        self.axis = p['axis'].strip('/')
+        self.worker = AxisWorker(make_stage(p)).start()
+        self.port, self.dialect = p['port'], p['dialect']
+        ns = f'/{self.axis}'
+        self.state_pub = self.create_publisher(JointState, f'{ns}/state', 10)
+        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.create_subscription(Float64, f'{ns}/target', self.on_target, 10)
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.create_subscription(Bool, '/estop', self.on_estop, latched)
+        self.create_service(Trigger, f'{ns}/stop', self.on_stop)
+        self.create_service(Trigger, f'{ns}/home', self.on_home)
+        self.create_timer(1.0 / p['state_rate'], self.publish_state)
+        self.create_timer(1.0, self.publish_diagnostics)
+        self._last = None  # (time, position) of the previous state, for the velocity
+
+    def on_target(self, msg):
+        """Hand a target to the worker, or log why it is refused."""
+        try:
+            self.worker.set_target(msg.data)
+        except stage.TargetRefused as exc:
+            self.get_logger().warning(f'{self.axis}: target refused: {exc}')
+
+    def on_estop(self, msg):
+        """Engage or release the estop."""
+        self.worker.set_estop(msg.data)
+        if msg.data:
+            self.get_logger().warning(f'{self.axis}: estop: axis stopped, targets refused')
+
+    def on_stop(self, _request, response):
+        """Stop now."""
+        self.worker.stop()
+        response.success, response.message = True, 'stopping: home again before moving'
+        return response
+
+    def on_home(self, _request, response):
+        """Make where the axis stands its zero."""
+        response.success, response.message = self.worker.home()
+        return response
+
+    def publish_state(self):
+        """Publish position and velocity (from successive positions)."""
+        snap = self.worker.snapshot()
+        if snap['position_m'] is None:
+            return
+        now = self.get_clock().now()
+        velocity = 0.0
+        if self._last is not None and snap['moving']:
+            dt = (now - self._last[0]).nanoseconds * 1e-9
+            velocity = (snap['position_m'] - self._last[1]) / dt if dt > 0 else 0.0
+        self._last = (now, snap['position_m'])
+        msg = JointState(name=[self.axis], position=[snap['position_m']],
+                         velocity=[velocity if math.isfinite(velocity) else 0.0])
+        msg.header.stamp = now.to_msg()
+        self.state_pub.publish(msg)
+
+    def publish_diagnostics(self):
+        """Publish one status for the axis."""
+        snap = self.worker.snapshot()
+        if not snap['connected']:
+            level, message = 'error', snap['error'] or 'not connected'
+        elif snap['estop']:
+            level, message = 'warn', 'estop active: stopped'
+        elif not snap['homed']:
+            level, message = 'warn', 'not homed: call home before moving'
+        elif snap['error']:
+            level, message = 'warn', snap['error']
+        else:
+            level, message = 'ok', 'moving' if snap['moving'] else 'ready'
+        values = {**snap, 'position': 'measured' if snap['measured']
+                  else 'estimated (counted, no readback)', 'dialect': self.dialect}
+        msg = DiagnosticArray(status=[diagnostic_status(f'{NODE_NAME}: {self.axis}', self.port,
+                                                        level, message, values)])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.diag_pub.publish(msg)
+
+    def shutdown(self):
+        """Stop the axis and close the line; return whether the stop was answered."""
+        return self.worker.shutdown()
 
 
 def main(args=None):
-    """Parse the command line (``--help`` works) and refuse to run."""
-    parser = argparse.ArgumentParser(
-        prog='inserter_node',
-        description='Drive the linear insertion stage (/inserter/target, /inserter/state).'
-                    ' Not implemented yet.')
-    parser.parse_known_args(args)
-    sys.exit('inserter_node: not implemented yet (a later issue builds it)')
+    """Run the node; on exit (Ctrl-C, SIGTERM, error) leave the axis stopped."""
+    argv = sys.argv[1:] if args is None else list(args)
+    if wants_help(argv):
+        print('usage: inserter_node [--ros-args --params-file FILE | -p NAME:=VALUE ...]\n\n'
+              + __doc__ + '\nparameters:\n' + describe())
+        return
+    try:
+        warnings = init_checked(argv, NODE_NAME, INSERTER_PARAMS)
+    except ConfigError as exc:
+        print(f'inserter_node: not started: {exc}', file=sys.stderr)
+        sys.exit(2)
+    node = None
+    try:
+        node = InserterNode()
+        for warning in warnings:
+            node.get_logger().warning(warning)
+        spin_until_signal(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except DriverError as exc:
+        print(f'inserter_node: not started: {exc}', file=sys.stderr)
+        sys.exit(2)
+    finally:
+        ignore_further_signals(NODE_NAME)
+        if node is not None:
+            stopped = node.shutdown()
+            print('inserter_node: ' + ('axis stopped' if stopped else
+                                       'stop NOT confirmed by the stage: check the axis'),
+                  file=sys.stderr, flush=True)
+            node.destroy_node()
+        rclpy.try_shutdown()
 
 
 if __name__ == '__main__':

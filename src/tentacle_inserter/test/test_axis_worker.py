@@ -63,6 +63,18 @@ def test_stop_cuts_a_move_short_at_once(worker):
     assert emu.state()['position_m'] < 0.03
 
 
+def test_a_home_asked_for_right_after_a_stop_is_done(worker):
+    w, emu = worker
+    w.set_target(0.030)
+    assert wait_for(lambda: emu.state()['moving'])
+    w.stop()
+    t0 = time.monotonic()
+    assert w.home(timeout_s=3.0) == (True, 'zero is here')   # not lost behind the stop
+    assert time.monotonic() - t0 < 2.0
+    assert w.snapshot()['homed'] and w.snapshot()['error'] == ''
+    assert [e['command'] for e in emu.log].count('M112') == 1  # one stop, not two
+
+
 def test_the_estop_halts_and_holds_until_released(worker):
     w, emu = worker
     w.set_target(0.030)

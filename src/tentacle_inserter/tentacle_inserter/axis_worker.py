@@ -88,9 +88,16 @@ class AxisWorker:
         return self._home_result
 
     def snapshot(self):
-        """Return the state to publish: position (m), moving, homed, connected, faults."""
+        """
+        Return the state to publish: position (m), velocity (m/s), moving, homed, faults.
+
+        During a move the position and velocity are the move's profile (the firmware is
+        busy with it), and ``estimated`` says so; a step1mm position is always estimated.
+        """
+        position, velocity, measured = self.stage.estimate()
         with self._cond:
-            return {'position_m': self.stage.position_m, 'moving': self._moving,
+            return {'position_m': position, 'velocity_m_s': velocity,
+                    'estimated': not measured, 'moving': self._moving,
                     'homed': getattr(self.stage, 'homed', True), 'connected': self.connected,
                     'measured': self.stage.measured, 'estop': self._estop,
                     'error': self.error, 'moves': self.moves, 'refusals': self.refusals}

@@ -12,7 +12,6 @@ A step1mm axis reports a counted position: /diagnostics says it is estimated. Th
 is tentacle_inserter.axis_worker and stage (no rclpy); this module is the ROS glue.
 """
 
-import math
 import sys
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -68,7 +67,6 @@ class InserterNode(Node):
         self.create_service(Trigger, f'{ns}/home', self.on_home)
         self.create_timer(1.0 / p['state_rate'], self.publish_state)
         self.create_timer(1.0, self.publish_diagnostics)
-        self._last = None  # (time, position) of the previous state, for the velocity
 
     def on_target(self, msg):
         """Hand a target to the worker, or log why it is refused."""
@@ -95,19 +93,13 @@ class InserterNode(Node):
         return response
 
     def publish_state(self):
-        """Publish position and velocity (from successive positions)."""
+        """Publish position and velocity (nothing while the position is unknown)."""
         snap = self.worker.snapshot()
         if snap['position_m'] is None:
             return
-        now = self.get_clock().now()
-        velocity = 0.0
-        if self._last is not None and snap['moving']:
-            dt = (now - self._last[0]).nanoseconds * 1e-9
-            velocity = (snap['position_m'] - self._last[1]) / dt if dt > 0 else 0.0
-        self._last = (now, snap['position_m'])
-        msg = JointState(name=[self.axis], position=[snap['position_m']],
-                         velocity=[velocity if math.isfinite(velocity) else 0.0])
-        msg.header.stamp = now.to_msg()
+        msg = JointState(name=[self.axis], position=[float(snap['position_m'])],
+                         velocity=[float(snap['velocity_m_s'])])
+        msg.header.stamp = self.get_clock().now().to_msg()
         self.state_pub.publish(msg)
 
     def publish_diagnostics(self):

@@ -20,7 +20,7 @@ import math
 from tentacle_common.attempts import Attempts
 from tentacle_common.errors import DriverError, Refused, ReplyTimeout
 from tentacle_inserter import gcode, step1mm
-from tentacle_inserter.trapezoid import move_time_s
+from tentacle_inserter.trapezoid import move_time_s, position_at
 
 POLL_S = 0.01  # how often a waiting move looks whether it was cancelled (s)
 
@@ -84,6 +84,7 @@ class GcodeStage:
         self.attempts = Attempts(line, retries=retries, max_turnaround_s=reply_timeout_s)
         self.position_m = None  # as last read back (None: unknown)
         self.homed = False
+        self._motion = None     # (start m, target m, when it began s) of the move under way
 
     # -- exchanges --------------------------------------------------------------------------
     def _exchange(self, request, timeout_s):
@@ -145,7 +146,7 @@ class GcodeStage:
         allowed = (move_time_s(target - start, self.max_speed_m_s, self.accel_m_s2)
                    * self.time_margin + self.slack_s)
         self._command(gcode.move(target, self.max_speed_m_s))
-        self.position_m = None  # moving: unknown until read back
+        self.position_m, self._motion = None, (start, target, self.line.now())
         try:  # once: a stalled move is not waited for twice
             if not self._wait_for_motion(allowed, cancelled):
                 self.stop()
@@ -155,7 +156,24 @@ class GcodeStage:
             self.stop()
             raise MoveFailed(f'move to {target * 1e3:.3f} mm did not finish in {allowed:.2f} s'
                              f' ({exc}): the axis is stopped and must be homed again') from None
+        finally:
+            self._motion = None
         return self.read_position()
+
+    def estimate(self, now=None):
+        """
+        Return (position m, velocity m/s, measured): read back, or during a move its profile.
+
+        While a move runs the firmware is not asked (it is busy with M400): the position is
+        where the trapezoid puts it, and ``measured`` is False.
+        """
+        motion = self._motion
+        if motion is None:
+            return self.position_m, 0.0, self.position_m is not None
+        start, target, began = motion
+        position, velocity = position_at((self.line.now() if now is None else now) - began,
+                                         start, target, self.max_speed_m_s, self.accel_m_s2)
+        return position, velocity, False
 
     def _wait_for_motion(self, allowed_s, cancelled):
         """Send M400; return True at its ok, False once cancelled (ReplyTimeout past allowed)."""
@@ -176,7 +194,7 @@ class GcodeStage:
     def stop(self):
         """Halt at once (M112), reset (M999), read the count back; unhome; return it (m)."""
         self.line.write(gcode.halt())   # Marlin answers nothing to M112
-        self.homed = False
+        self.homed, self._motion = False, None
         self.attempts.out_of_step = True  # drop whatever a halted firmware still says
         self._command(gcode.reset())
         return self.read_position()
@@ -217,6 +235,10 @@ class Step1mmStage:
             self.line.write(self.mapping.command(1 if steps > 0 else -1) * abs(steps))
             self.position_m += steps * step1mm.STEP_M
         return self.position_m
+
+    def estimate(self, now=None):
+        """Return (counted position m, 0.0, False): never measured."""
+        return self.position_m, 0.0, False
 
     def stop(self):
         """Send the stop character; return the counted position (what was sent, not done)."""

@@ -102,3 +102,19 @@ def test_a_lost_line_reconnects_unhomed_and_replays_nothing(worker):
     assert not w.snapshot()['homed']
     time.sleep(0.3)
     assert targets_sent(emu) == []
+
+
+def test_state_during_a_move_follows_the_profile_and_says_so(worker):
+    w, emu = worker
+    w.set_target(0.020)
+    assert wait_for(lambda: emu.state()['moving'])
+    for _ in range(5):
+        time.sleep(0.2)
+        snap, truth = w.snapshot(), emu.state()
+        if not snap['moving']:
+            break
+        assert snap['estimated']
+        assert snap['position_m'] == pytest.approx(truth['position_m'], abs=0.0005)
+        assert snap['velocity_m_s'] == pytest.approx(truth['velocity_m_s'], abs=0.002)
+    assert wait_for(lambda: not w.snapshot()['moving'], 5.0)
+    assert not w.snapshot()['estimated']

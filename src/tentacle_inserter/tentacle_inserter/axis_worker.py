@@ -31,6 +31,8 @@ class AxisWorker:
         self._home = None           # a threading.Event while a home is asked for
         self._home_result = (False, '')
         self._estop = False
+        self._enabled = True
+        self._motor_off = False     # a disable asked for and not yet done
         self._shutdown = False
         self._moving = False
         self.connected = False
@@ -56,6 +58,8 @@ class AxisWorker:
             with self._cond:
                 if self._estop:
                     raise TargetRefused('estop active: no motion until it is released')
+                if not self._enabled:
+                    raise TargetRefused('axis disabled: enable it first')
                 self._target = target
                 self._cond.notify_all()
         except TargetRefused:
@@ -74,6 +78,14 @@ class AxisWorker:
             self._estop = bool(active)
             if self._estop:
                 self._target, self._stop = None, True
+            self._cond.notify_all()
+
+    def set_enabled(self, on):
+        """Enable (targets taken again) or disable (stop, motor off, targets refused)."""
+        with self._cond:
+            self._enabled = bool(on)
+            if not on:
+                self._target, self._stop, self._motor_off = None, True, True
             self._cond.notify_all()
 
     def home(self, timeout_s=HOME_TIMEOUT_S):
@@ -100,6 +112,7 @@ class AxisWorker:
                     'estimated': not measured, 'moving': self._moving,
                     'homed': getattr(self.stage, 'homed', True), 'connected': self.connected,
                     'measured': self.stage.measured, 'estop': self._estop,
+                    'enabled': self._enabled,
                     'error': self.error, 'moves': self.moves, 'refusals': self.refusals}
 
     def shutdown(self, timeout_s=5.0):
@@ -127,11 +140,14 @@ class AxisWorker:
                 self._cond.wait_for(lambda: self._shutdown or self._stop or self._home
                                     or self._target is not None, timeout=0.5)
                 stop, home, target = self._stop, self._home, self._target
-                self._stop, self._home, self._target = False, None, None
+                motor_off = self._motor_off
+                self._stop, self._home, self._target, self._motor_off = False, None, None, False
                 self._moving = target is not None and not stop
             try:
                 if stop:
                     self.stage.stop()
+                if motor_off:
+                    self.stage.motor_off()
                 if home is not None:  # a home asked for with (or after) a stop still happens
                     self.stage.home()
                     self._home_result, self.error = (True, 'zero is here'), ''

@@ -3,8 +3,9 @@ inserter_node: one linear axis (the inserter, or the backbone stage) on a serial
 
 Topics under the axis namespace (parameter ``axis``, DESIGN.md): /<axis>/target
 (std_msgs/Float64, absolute position, m), /<axis>/state (sensor_msgs/JointState: position m,
-velocity m/s, at ``state_rate``), /<axis>/stop and /<axis>/home (std_srvs/Trigger), /estop
-(std_msgs/Bool, transient local) honoured, /diagnostics. A target that is not finite or is
+velocity m/s, at ``state_rate``), /<axis>/stop and /<axis>/home (std_srvs/Trigger),
+/<axis>/enable (std_srvs/SetBool: false stops, switches the motor off and refuses targets),
+/estop (std_msgs/Bool, transient local) honoured, /diagnostics. A target that is not finite or is
 outside [0, max_length] is refused with a logged reason and never reaches the wire; the
 axis moves to the latest target only, a move that does not end in its expected time stops
 the axis, and after a stop or a lost line it must be homed again (home: "zero is here").
@@ -21,7 +22,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
-from std_srvs.srv import Trigger
+from std_srvs.srv import SetBool, Trigger
 from tentacle_common.driver_node import (declare_parameters, diagnostic_status,
                                          ignore_further_signals, init_checked,
                                          spin_until_signal, wants_help)
@@ -65,6 +66,7 @@ class InserterNode(Node):
         self.create_subscription(Bool, '/estop', self.on_estop, latched)
         self.create_service(Trigger, f'{ns}/stop', self.on_stop)
         self.create_service(Trigger, f'{ns}/home', self.on_home)
+        self.create_service(SetBool, f'{ns}/enable', self.on_enable)
         self.create_timer(1.0 / p['state_rate'], self.publish_state)
         self.create_timer(1.0, self.publish_diagnostics)
 
@@ -85,6 +87,13 @@ class InserterNode(Node):
         """Stop now."""
         self.worker.stop()
         response.success, response.message = True, 'stopping: home again before moving'
+        return response
+
+    def on_enable(self, request, response):
+        """Enable (targets taken) or disable (stop, motor off, targets refused)."""
+        self.worker.set_enabled(request.data)
+        response.success = True
+        response.message = 'enabled' if request.data else 'stopping, motor off, targets refused'
         return response
 
     def on_home(self, _request, response):
@@ -109,6 +118,8 @@ class InserterNode(Node):
             level, message = 'error', snap['error'] or 'not connected'
         elif snap['estop']:
             level, message = 'warn', 'estop active: stopped'
+        elif not snap['enabled']:
+            level, message = 'warn', 'disabled: motor off, targets refused'
         elif not snap['homed']:
             level, message = 'warn', 'not homed: call home before moving'
         elif snap['error']:

@@ -175,6 +175,11 @@ class GcodeStage:
                                          start, target, self.max_speed_m_s, self.accel_m_s2)
         return position, velocity, False
 
+    def motor_off(self):
+        """De-energise the motor (M18): the axis may be moved by hand; unhome."""
+        self._command(gcode.motor_off())
+        self.homed = False
+
     def _wait_for_motion(self, allowed_s, cancelled):
         """Send M400; return True at its ok, False once cancelled (ReplyTimeout past allowed)."""
         self.line.write(gcode.wait_for_motion())
@@ -235,6 +240,10 @@ class Step1mmStage:
             self.line.write(self.mapping.command(1 if steps > 0 else -1) * abs(steps))
             self.position_m += steps * step1mm.STEP_M
         return self.position_m
+
+    def motor_off(self):
+        """Stop (the firmware has no motor-off command)."""
+        self.stop()
 
     def estimate(self, now=None):
         """Return (counted position m, 0.0, False): never measured."""

@@ -118,3 +118,18 @@ def test_state_during_a_move_follows_the_profile_and_says_so(worker):
         assert snap['velocity_m_s'] == pytest.approx(truth['velocity_m_s'], abs=0.002)
     assert wait_for(lambda: not w.snapshot()['moving'], 5.0)
     assert not w.snapshot()['estimated']
+
+
+def test_disable_stops_switches_the_motor_off_and_refuses_targets(worker):
+    w, emu = worker
+    w.set_target(0.030)
+    assert wait_for(lambda: emu.state()['moving'])
+    w.set_enabled(False)
+    assert wait_for(lambda: not emu.state()['motor_on'], 2.0)
+    assert not emu.state()['moving']
+    with pytest.raises(stage.TargetRefused, match='disabled'):
+        w.set_target(0.001)
+    w.set_enabled(True)
+    assert w.home()[0]
+    w.set_target(0.001)
+    assert wait_for(lambda: w.moves == 1 and emu.state()['motor_on'], 5.0)

@@ -14,9 +14,6 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Vector3Stamped
-import rclpy
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Bool
@@ -25,11 +22,9 @@ from std_srvs.srv import SetBool
 from tentacle_coils.bank_process import BankClient
 from tentacle_coils.errors import CommandRejected
 from tentacle_coils.field_map import ActuationMap, Limits, plan_currents
-from tentacle_coils.params import COILS_PARAMS, describe, NODE_NAME
+from tentacle_coils.params import COILS_PARAMS, NODE_NAME
 from tentacle_common.driver_node import (declare_parameters, diagnostic_status,
-                                         ignore_further_signals, init_checked, RosLogHandler,
-                                         spin_until_signal, wants_help)
-from tentacle_common.errors import ConfigError, DriverError
+                                         RosLogHandler, run_node)
 
 FRAME_ID = 'coils'
 
@@ -186,37 +181,12 @@ class CoilsNode(Node):
 
 def main(args=None):
     """Run the node; on exit (Ctrl-C, SIGTERM, error) leave the coils at zero and off."""
-    argv = sys.argv[1:] if args is None else list(args)
-    if wants_help(argv):
-        print('usage: coils_node [--ros-args --params-file FILE | -p NAME:=VALUE ...]\n\n'
-              + __doc__ + '\nparameters:\n' + describe())
-        return
-    try:
-        warnings = init_checked(argv, NODE_NAME, COILS_PARAMS)
-    except ConfigError as exc:
-        print(f'coils_node: not started: {exc}', file=sys.stderr)
-        sys.exit(2)
-    node = None
-    try:
-        node = CoilsNode()
-        for warning in warnings:
-            node.get_logger().warning(warning)
-        spin_until_signal(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (DriverError, ParameterException) as exc:
-        print(f'coils_node: not started: {exc}', file=sys.stderr)
-        sys.exit(2)
-    finally:
-        ignore_further_signals(NODE_NAME)
-        if node is not None:
-            unsafe = node.shutdown()
-            print('coils_node: outputs ' + ('zero and off' if not unsafe else
-                                            'NOT confirmed zero and off: ' + '; '.join(unsafe)
-                                            + ': check the supplies'),
-                  file=sys.stderr, flush=True)
-            node.destroy_node()
-        rclpy.try_shutdown()
+    def stop_safely(node):
+        unsafe = node.shutdown()
+        return 'outputs ' + ('zero and off' if not unsafe else 'NOT confirmed zero and off: '
+                             + '; '.join(unsafe) + ': check the supplies')
+    run_node(sys.argv[1:] if args is None else list(args), NODE_NAME, COILS_PARAMS, __doc__,
+             CoilsNode, stop_safely)
 
 
 if __name__ == '__main__':

@@ -56,11 +56,6 @@ COILS_PARAMS = (
 )
 
 
-def describe():
-    """Return the table as text for ``--help``."""
-    return common.describe(COILS_PARAMS)
-
-
 def check_params_file(path):
     """Check a params file against the table; see tentacle_common.params."""
     return common.check_params_file(path, NODE_NAME, COILS_PARAMS)

@@ -5,22 +5,25 @@ The only module of tentacle_common that imports rclpy. A driver node declares it
 with ``declare_parameters``, forwards its pure code's logging with ``RosLogHandler``, builds
 one DiagnosticStatus per device with ``diagnostic_status``, starts rclpy with
 ``init_checked`` (its parameters checked against the table first) and spins with
-``spin_until_signal``, after which it runs its safe stop undisturbed by further signals.
+``spin_until_signal``, after which it runs its safe stop undisturbed by further signals;
+``run_node`` does all of that for a node's ``main``.
 """
 
 import logging
 import os
 import signal
+import sys
 import tempfile
 import threading
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
-from tentacle_common.errors import ConfigError
-from tentacle_common.params import check_ros_args
+from tentacle_common.errors import ConfigError, DriverError
+from tentacle_common.params import check_ros_args, describe
 import yaml
 
 LEVELS = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN,
@@ -148,3 +151,42 @@ def spin_until_signal(node, poll_s=0.1):
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
     return received[0] if received else 0
+
+
+def run_node(argv, node_name, table, doc, make_node, stop_safely):
+    """
+    Run a driver node's life: --help, a checked start, spin until a signal, its safe stop.
+
+    :param argv: the command line after the program name
+    :param table: the node's parameter table (tentacle_common.params.Param rows)
+    :param doc: what --help prints above the table (the node module's docstring)
+    :param make_node: returns the node (raising DriverError or ParameterException: exit 2)
+    :param stop_safely: node -> the line printed at exit ('<node_name>: <line>'), after the
+        actuators were brought to their safe state, read back
+    """
+    if wants_help(argv):
+        print(f'usage: {node_name} [--ros-args --params-file FILE | -p NAME:=VALUE ...]\n\n'
+              + doc + '\nparameters:\n' + describe(table))
+        return
+    try:
+        warnings = init_checked(argv, node_name, table)
+    except ConfigError as exc:
+        print(f'{node_name}: not started: {exc}', file=sys.stderr)
+        sys.exit(2)
+    node = None
+    try:
+        node = make_node()
+        for warning in warnings:
+            node.get_logger().warning(warning)
+        spin_until_signal(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (DriverError, ParameterException) as exc:
+        print(f'{node_name}: not started: {exc}', file=sys.stderr)
+        sys.exit(2)
+    finally:
+        ignore_further_signals(node_name)
+        if node is not None:
+            print(f'{node_name}: {stop_safely(node)}', file=sys.stderr, flush=True)
+            node.destroy_node()
+        rclpy.try_shutdown()

@@ -16,21 +16,17 @@ is tentacle_inserter.axis_worker and stage (no rclpy); this module is the ROS gl
 import sys
 
 from diagnostic_msgs.msg import DiagnosticArray
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
 from std_srvs.srv import SetBool, Trigger
-from tentacle_common.driver_node import (declare_parameters, diagnostic_status,
-                                         ignore_further_signals, init_checked,
-                                         spin_until_signal, wants_help)
-from tentacle_common.errors import ConfigError, DriverError
+from tentacle_common.driver_node import declare_parameters, diagnostic_status, run_node
+from tentacle_common.errors import ConfigError
 from tentacle_common.serial_line import SerialLine
 from tentacle_inserter import stage, step1mm
 from tentacle_inserter.axis_worker import AxisWorker
-from tentacle_inserter.params import describe, INSERTER_PARAMS, NODE_NAME
+from tentacle_inserter.params import INSERTER_PARAMS, NODE_NAME
 
 
 def make_stage(p):
@@ -140,36 +136,11 @@ class InserterNode(Node):
 
 def main(args=None):
     """Run the node; on exit (Ctrl-C, SIGTERM, error) leave the axis stopped."""
-    argv = sys.argv[1:] if args is None else list(args)
-    if wants_help(argv):
-        print('usage: inserter_node [--ros-args --params-file FILE | -p NAME:=VALUE ...]\n\n'
-              + __doc__ + '\nparameters:\n' + describe())
-        return
-    try:
-        warnings = init_checked(argv, NODE_NAME, INSERTER_PARAMS)
-    except ConfigError as exc:
-        print(f'inserter_node: not started: {exc}', file=sys.stderr)
-        sys.exit(2)
-    node = None
-    try:
-        node = InserterNode()
-        for warning in warnings:
-            node.get_logger().warning(warning)
-        spin_until_signal(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except DriverError as exc:
-        print(f'inserter_node: not started: {exc}', file=sys.stderr)
-        sys.exit(2)
-    finally:
-        ignore_further_signals(NODE_NAME)
-        if node is not None:
-            stopped = node.shutdown()
-            print('inserter_node: ' + ('axis stopped' if stopped else
-                                       'stop NOT confirmed by the stage: check the axis'),
-                  file=sys.stderr, flush=True)
-            node.destroy_node()
-        rclpy.try_shutdown()
+    def stop_safely(node):
+        return 'axis stopped' if node.shutdown() else \
+            'stop NOT confirmed by the stage: check the axis'
+    run_node(sys.argv[1:] if args is None else list(args), NODE_NAME, INSERTER_PARAMS,
+             __doc__, InserterNode, stop_safely)
 
 
 if __name__ == '__main__':

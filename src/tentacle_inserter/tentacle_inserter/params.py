@@ -6,7 +6,6 @@ descriptor, ``inserter_node --help`` prints the table, and what a lab writes is 
 against it before rcl reads it. Names are those of DESIGN.md; units are in the descriptions.
 """
 
-from tentacle_common import params as common
 from tentacle_common.params import Param
 
 NODE_NAME = 'inserter_node'
@@ -32,8 +31,3 @@ INSERTER_PARAMS = (
     Param('step1mm_retract', '1', "step1mm: the character that retracts 1 mm (earlier: '2')"),
     Param('step1mm_stop', '3', 'step1mm: the character that stops'),
 )
-
-
-def describe():
-    """Return the table as text for ``--help``."""
-    return common.describe(INSERTER_PARAMS)

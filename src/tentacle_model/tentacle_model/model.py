@@ -78,6 +78,7 @@ class TentacleModel:
         self.dipoles, self.backbone_m = dipoles, backbone_m
         self.tol, self.max_iterations = tol, max_iterations
         self._chains = {}
+        self._last_evaluation = None  # (solution, field, _evaluate's result)
         self.chain(spec.length_m)  # a bad knob is refused now, not at the first solve
 
     def chain(self, inserted_m, backbone_m=None):
@@ -180,12 +181,20 @@ class TentacleModel:
         return every if self.dof == 3 else every[0::3]
 
     def _evaluate(self, solution, field_t):
+        """Return (chain, Evaluation, free angles, free Hessian) at a solution, the last kept."""
+        # The planner asks for the stability and both sensitivities of one solution in turn:
+        # one pass over the chain serves them all.
+        field = np.asarray(field_t, dtype=float)
+        last = self._last_evaluation
+        if last is not None and last[0] is solution and np.array_equal(last[1], field):
+            return last[2]
         chain = solution.chain
-        state = spatial.evaluate(chain, solution.state, np.asarray(field_t, dtype=float),
-                                 self.gravity_m_s2, True, None,
+        state = spatial.evaluate(chain, solution.state, field, self.gravity_m_s2, True, None,
                                  link_loads.of_chain(chain, self.dipoles))
         free = self._free(chain.size)
-        return chain, state, free, state.hessian[np.ix_(free, free)]
+        result = chain, state, free, state.hessian[np.ix_(free, free)]
+        self._last_evaluation = (solution, field.copy(), result)
+        return result
 
     def _points_jacobian(self, state, free):
         """Return d p / d q (n + 1, 3, N) for the free angles: a_e x (p_k - p_j(e)), k > j."""

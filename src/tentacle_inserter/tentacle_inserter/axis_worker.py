@@ -115,6 +115,21 @@ class AxisWorker:
                     'enabled': self._enabled,
                     'error': self.error, 'moves': self.moves, 'refusals': self.refusals}
 
+    def status(self):
+        """Return (level 'ok' | 'warn' | 'error', message) for /diagnostics."""
+        snap = self.snapshot()
+        if not snap['connected']:
+            return 'error', snap['error'] or 'not connected'
+        if snap['estop']:
+            return 'warn', 'estop active: stopped'
+        if not snap['enabled']:
+            return 'warn', 'disabled: motor off, targets refused'
+        if not snap['homed']:
+            return 'warn', 'not homed: call home before moving'
+        if snap['error']:
+            return 'warn', snap['error']
+        return 'ok', 'moving' if snap['moving'] else 'ready'
+
     def shutdown(self, timeout_s=5.0):
         """Stop the axis, close the line, end the thread; return whether the stop was answered."""
         with self._cond:

@@ -110,18 +110,7 @@ class InserterNode(Node):
     def publish_diagnostics(self):
         """Publish one status for the axis."""
         snap = self.worker.snapshot()
-        if not snap['connected']:
-            level, message = 'error', snap['error'] or 'not connected'
-        elif snap['estop']:
-            level, message = 'warn', 'estop active: stopped'
-        elif not snap['enabled']:
-            level, message = 'warn', 'disabled: motor off, targets refused'
-        elif not snap['homed']:
-            level, message = 'warn', 'not homed: call home before moving'
-        elif snap['error']:
-            level, message = 'warn', snap['error']
-        else:
-            level, message = 'ok', 'moving' if snap['moving'] else 'ready'
+        level, message = self.worker.status()
         values = {**snap, 'position': 'measured' if snap['measured']
                   else 'estimated (counted, no readback)', 'dialect': self.dialect}
         msg = DiagnosticArray(status=[diagnostic_status(f'{NODE_NAME}: {self.axis}', self.port,

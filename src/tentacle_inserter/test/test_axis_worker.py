@@ -133,3 +133,14 @@ def test_disable_stops_switches_the_motor_off_and_refuses_targets(worker):
     assert w.home()[0]
     w.set_target(0.001)
     assert wait_for(lambda: w.moves == 1 and emu.state()['motor_on'], 5.0)
+
+
+def test_the_status_says_what_holds_the_axis(worker):
+    w, emu = worker
+    assert w.status() == ('ok', 'ready')
+    w.set_estop(True)
+    assert w.status() == ('warn', 'estop active: stopped')
+    w.set_estop(False)
+    assert wait_for(lambda: w.status() == ('warn', 'not homed: call home before moving'))
+    w.set_enabled(False)
+    assert w.status() == ('warn', 'disabled: motor off, targets refused')

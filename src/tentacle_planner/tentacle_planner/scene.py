@@ -39,7 +39,7 @@ spherical obstacle. The model's size is checked as the solver would (statics.che
 """
 
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import hashlib
 import pathlib
 
@@ -127,6 +127,7 @@ class Scene:
     backbone_steps_m: tuple | None = None   # the backbone's reach past the base per key step
     coiling_radius_m: float | None = None   # the target coils at this radius past the backbone
     coiling_side: int = 1                   # +1: towards the base normal (link y), -1: away
+    _coil_paths: dict = field(default_factory=dict, repr=False)  # backbone m -> Path, built once
 
     def target_path(self, inserted_m, backbone_m=0.0):
         """
@@ -137,8 +138,12 @@ class Scene:
         """
         if self.coiling_radius_m is None:
             return self.path
-        return coiling_path(self.tentacle, backbone_m, self.coiling_radius_m,
-                            self.coiling_side, f'{self.source}: coiling')
+        key = round(float(backbone_m), 12)
+        if key not in self._coil_paths:
+            self._coil_paths[key] = coiling_path(self.tentacle, backbone_m,
+                                                 self.coiling_radius_m, self.coiling_side,
+                                                 f'{self.source}: coiling')
+        return self._coil_paths[key]
 
     def shape_error(self, step):
         """Return (shape RMS, tip error), m, of a Step (paths.shape_error, DESIGN.md)."""

@@ -1,15 +1,21 @@
 """
-inserter_node as a real process over DDS, driving the gcode stage emulator over a pty.
+inserter_node as a real process over DDS, driving stage emulators over ptys.
 
-The emulator runs in this process (its pty path is what the node opens); what the node
-publishes is checked against the emulator's true position.
+The gcode emulator mostly runs in this process (its pty path is what the node opens), so
+what the node publishes is checked against the emulator's true position at any instant;
+the side-by-side test runs both axes in the stage_emulator executable. Every fault of the
+stage emulator is injected while the node runs, and the safe state is read back from the
+emulator, never assumed.
 """
 
 import math
+import os
+import signal
 import sys
 import threading
 import time
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import pytest
 import rclpy  # tests/conftest.py claimed the private ROS domain before this
 from rclpy.context import Context
@@ -19,43 +25,67 @@ from rig_support import wait_for
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
 from std_srvs.srv import Trigger
+from tentacle_sim.emulator_client import StageEmulatorProcess
 from tentacle_sim.sim_rig import NodeProcess
 from tentacle_sim.stage_emulator import GcodeStage
 
 pytestmark = pytest.mark.ros
 STEP_M = 1e-5  # 100 steps a mm
+SPEED, ACCEL = 0.01, 0.5
 
 
 class AxisProbe:
-    """Publishes targets and the estop, calls stop and home, records /inserter/state."""
+    """Publishes targets and the estop, calls stop and home, records state and diagnostics."""
 
-    def __init__(self):
+    def __init__(self, axes=('inserter',)):
         self.context = Context()
         rclpy.init(context=self.context)
         self.node = rclpy.create_node('axis_probe', context=self.context)
-        self.states, self.lock = [], threading.Lock()
-        self.target_pub = self.node.create_publisher(Float64, '/inserter/target', 10)
+        self.lock = threading.Lock()
+        self.states = {axis: [] for axis in axes}
+        self.diagnostics = []
+        self.target_pubs = {axis: self.node.create_publisher(Float64, f'/{axis}/target', 10)
+                            for axis in axes}
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.estop_pub = self.node.create_publisher(Bool, '/estop', latched)
-        self.node.create_subscription(JointState, '/inserter/state', self._keep, 10)
-        self.clients = {name: self.node.create_client(Trigger, f'/inserter/{name}')
-                        for name in ('stop', 'home')}
+        for axis in axes:
+            self.node.create_subscription(JointState, f'/{axis}/state',
+                                          lambda msg, a=axis: self._keep(self.states[a], msg),
+                                          10)
+        self.node.create_subscription(DiagnosticArray, '/diagnostics',
+                                      lambda msg: self._keep(self.diagnostics, msg), 10)
+        self.clients = {(axis, name): self.node.create_client(Trigger, f'/{axis}/{name}')
+                        for axis in axes for name in ('stop', 'home')}
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         threading.Thread(target=self.executor.spin, daemon=True).start()
 
-    def _keep(self, msg):
+    def _keep(self, log, msg):
         with self.lock:
-            self.states.append((time.monotonic(), msg))
+            log.append((time.monotonic(), msg))
 
-    def position(self, since=0.0):
+    def target(self, value, axis='inserter'):
+        self.target_pubs[axis].publish(Float64(data=float(value)))
+
+    def position(self, since=0.0, axis='inserter'):
         with self.lock:
-            fresh = [m for t, m in self.states if t >= since]
+            fresh = [m for t, m in self.states[axis] if t >= since]
         return fresh[-1].position[0] if fresh else None
 
-    def call(self, name, timeout_s=10.0):
-        client = self.clients[name]
+    def status(self, since=0.0, axis='inserter'):
+        """Return (level, message, values) of the axis's latest diagnostics, or None."""
+        with self.lock:
+            arrays = [m for t, m in self.diagnostics if t >= since]
+        for array in reversed(arrays):
+            for status in array.status:
+                if status.name == f'inserter_node: {axis}':
+                    return (status.level, status.message,
+                            {kv.key: kv.value for kv in status.values})
+        return None
+
+    def call(self, name, axis='inserter', timeout_s=10.0):
+        client = self.clients[(axis, name)]
         if not client.wait_for_service(timeout_sec=timeout_s):
             return None
         future = client.call_async(Trigger.Request())
@@ -68,56 +98,217 @@ class AxisProbe:
         rclpy.shutdown(context=self.context)
 
 
+def start_node(tmp_path, port, axis='inserter', **params):
+    settings = {'port': port, 'axis': axis, 'max_length': 0.05, 'max_speed': SPEED,
+                'acceleration': ACCEL, 'reply_timeout_s': 0.2, **params}
+    argv = [sys.executable, '-m', 'tentacle_inserter.inserter_node', '--ros-args']
+    for name, value in settings.items():
+        argv += ['-p', f'{name}:={value}']
+    return NodeProcess(argv, str(tmp_path / f'{axis}.log'))
+
+
 @pytest.fixture
 def axis(tmp_path):
+    """Return (probe, gcode emulator, node), homed; the node is stopped with SIGINT after."""
     link = str(tmp_path / 'stage')
-    emu = GcodeStage('e', link_path=link, accel_m_s2=0.5).start()
-    node = NodeProcess([sys.executable, '-m', 'tentacle_inserter.inserter_node', '--ros-args',
-                        '-p', f'port:={link}', '-p', 'max_length:=0.05',
-                        '-p', 'max_speed:=0.01', '-p', 'acceleration:=0.5',
-                        '-p', 'reply_timeout_s:=0.2'], str(tmp_path / 'node.log'))
+    emu = GcodeStage('e', link_path=link, accel_m_s2=ACCEL).start()
+    node = start_node(tmp_path, link)
     probe = AxisProbe()
     try:
-        response = probe.call('home', 20.0)
+        response = probe.call('home', timeout_s=20.0)
         assert response is not None and response.success, node.output()
         yield probe, emu, node
     finally:
         probe.close()
         code = node.stop()
         emu.stop()
-        assert code == 0, node.output()
+        assert code in (0, -signal.SIGKILL), node.output()
+
+
+def sent(emu, command, since=0.0):
+    return [e for e in emu.log if e.get('command') == command and e['t'] >= since]
+
+
+def truth(emu):
+    return emu.state()['position_m']
 
 
 def test_a_target_moves_the_axis_and_state_follows_the_truth(axis):
     probe, emu, node = axis
-    probe.target_pub.publish(Float64(data=0.008))
-    assert wait_for(lambda: emu.state()['position_m'] == pytest.approx(0.008, abs=STEP_M), 10)
+    probe.target(0.008)
+    assert wait_for(lambda: truth(emu) == pytest.approx(0.008, abs=STEP_M), 10)
     since = time.monotonic() + 0.2
     assert wait_for(lambda: probe.position(since) is not None, 2.0)
-    assert abs(probe.position(since) - emu.state()['position_m']) <= STEP_M
+    assert abs(probe.position(since) - truth(emu)) <= STEP_M
+    assert wait_for(lambda: (probe.status(since) or (None,))[0] == DiagnosticStatus.OK, 3.0)
+    assert probe.status(since)[2]['position'] == 'measured'
 
 
 @pytest.mark.parametrize('bad', [math.nan, math.inf, -0.001, 0.06])
 def test_a_bad_target_is_refused_and_never_reaches_the_wire(axis, bad):
     probe, emu, node = axis
-    probe.target_pub.publish(Float64(data=bad))
+    probe.target(bad)
     assert wait_for(lambda: 'target refused' in node.output(), 5.0)
     time.sleep(0.3)
-    assert not [e for e in emu.log if e.get('command') == 'G1']
+    assert not sent(emu, 'G1')
 
 
 def test_stop_and_estop_halt_and_hold(axis):
     probe, emu, node = axis
-    probe.target_pub.publish(Float64(data=0.04))
+    probe.target(0.04)
     assert wait_for(lambda: emu.state()['moving'], 5.0)
     assert probe.call('stop').success
-    assert wait_for(lambda: not emu.state()['moving'], 1.0)
+    assert wait_for(lambda: not emu.state()['busy'], 1.0)
     assert probe.call('home').success
     probe.estop_pub.publish(Bool(data=True))
     time.sleep(0.3)
-    moves = len([e for e in emu.log if e.get('command') == 'G1'])
-    probe.target_pub.publish(Float64(data=0.01))
+    moves = len(sent(emu, 'G1'))
+    for target in (0.01, 0.02, 0.03):
+        probe.target(target)
     time.sleep(0.5)
-    assert len([e for e in emu.log if e.get('command') == 'G1']) == moves
-    assert not emu.state()['moving']
+    assert len(sent(emu, 'G1')) == moves and not emu.state()['busy']
+    assert not probe.call('home').success        # no home under estop either
     probe.estop_pub.publish(Bool(data=False))
+
+
+def test_a_killed_node_leaves_the_axis_stopped(axis):
+    probe, emu, node = axis
+    probe.target(0.04)
+    assert wait_for(lambda: emu.state()['moving'], 5.0)
+    t_kill = time.monotonic()
+    node.stop(signal.SIGKILL)    # no chance to clean up: the axis process sees its input close
+    assert wait_for(lambda: not emu.state()['busy'], 2.0)
+    assert time.monotonic() - t_kill < 1.5
+    assert sent(emu, 'M112', t_kill) and emu.state()['travel_m'] < 0.03
+
+
+def test_a_stalled_move_is_reported_and_the_axis_stopped(axis):
+    probe, emu, node = axis
+    probe.target(0.01)
+    assert wait_for(lambda: emu.state()['moving'], 5.0)
+    t0 = time.monotonic()
+    emu.inject('stall')          # the position stops advancing; M400 never answers
+    allowed = 1.5 * (0.01 / SPEED + SPEED / ACCEL) + 0.5
+    assert wait_for(lambda: sent(emu, 'M112', t0), allowed + 2.0)
+    assert wait_for(lambda: 'did not finish' in node.output(), 2.0), node.output()
+    assert wait_for(lambda: (probe.status(t0 + allowed) or (None, ''))[1].startswith(
+        'not homed'), 3.0)
+    assert probe.status(t0 + allowed)[0] == DiagnosticStatus.WARN
+    since = time.monotonic() + 0.1
+    assert wait_for(lambda: probe.position(since) is not None, 2.0)
+    assert abs(probe.position(since) - truth(emu)) <= STEP_M   # read back where it stalled
+
+
+@pytest.mark.parametrize('factor, finishes', [(0.9, True), (0.3, False)])
+def test_a_slow_move_finishes_within_its_margin_or_is_stopped(axis, factor, finishes):
+    probe, emu, node = axis
+    emu.inject('slow', factor=factor)
+    t0 = time.monotonic()
+    probe.target(0.02)
+    if finishes:
+        assert wait_for(lambda: truth(emu) == pytest.approx(0.02, abs=STEP_M)
+                        and not emu.state()['busy'], 10.0)
+        time.sleep(0.3)
+        assert not sent(emu, 'M112', t0)
+    else:
+        assert wait_for(lambda: sent(emu, 'M112', t0), 10.0)
+        assert not emu.state()['busy'] and emu.state()['travel_m'] < 0.02
+        assert wait_for(lambda: 'did not finish' in node.output(), 2.0)
+
+
+def test_a_lost_ok_is_retried_and_the_axis_moves_once(axis):
+    probe, emu, node = axis
+    t0 = time.monotonic()
+    emu.inject('drop_reply', count=1, match='G1')
+    probe.target(0.005)
+    assert wait_for(lambda: truth(emu) == pytest.approx(0.005, abs=STEP_M)
+                    and not emu.state()['busy'], 10.0)
+    assert len(sent(emu, 'G1', t0)) == 2                  # the same absolute line twice
+    time.sleep(0.3)
+    assert not sent(emu, 'M112', t0) and truth(emu) == pytest.approx(0.005, abs=STEP_M)
+
+
+def test_a_lost_line_reconnects_reads_back_and_replays_nothing(axis):
+    probe, emu, node = axis
+    probe.target(0.01)
+    assert wait_for(lambda: emu.state()['moving'], 5.0)
+    emu.inject('disconnect', duration_s=1.0)
+    t_lost = time.monotonic()
+    assert wait_for(lambda: (probe.status(t_lost) or (None,))[0] == DiagnosticStatus.ERROR,
+                    4.0)
+    assert wait_for(lambda: sent(emu, 'M114', t_lost + 1.0), 6.0)     # read back, again
+    t_back = time.monotonic()
+    assert wait_for(lambda: (probe.status(t_back) or (None, ''))[1].startswith(
+        'not homed'), 4.0)
+    assert not sent(emu, 'G1', t_lost)                    # the old target is not replayed
+    probe.target(0.02)                                    # nor a new one taken, unhomed
+    assert wait_for(lambda: 'not homed' in node.output().split('line lost')[-1], 3.0)
+    assert not sent(emu, 'G1', t_lost) and not emu.state()['busy']
+
+
+def test_a_firmware_reset_mid_move_is_caught_and_read_back(axis):
+    probe, emu, node = axis
+    probe.target(0.02)
+    assert wait_for(lambda: truth(emu) > 0.003, 5.0)
+    t0 = time.monotonic()
+    emu.inject('reset')          # the board restarts: it forgets the move and counts from 0
+    stood = emu.state()['travel_m']
+    assert wait_for(lambda: sent(emu, 'M114', t0), 1.5)   # at its 'start', not at a timeout
+    assert 'restarted during the move' in node.output()
+    t_back = time.monotonic()
+    assert wait_for(lambda: (probe.status(t_back) or (None, ''))[1].startswith(
+        'not homed'), 5.0), (probe.status(), node.output())
+    since = time.monotonic() + 0.1
+    assert wait_for(lambda: probe.position(since) is not None, 2.0)
+    assert probe.position(since) == pytest.approx(truth(emu), abs=STEP_M) == 0.0
+    assert emu.state()['travel_m'] == pytest.approx(stood)    # and nothing moved it since
+
+
+def test_a_killed_axis_process_is_replaced_and_the_axis_halted(axis):
+    probe, emu, node = axis
+    probe.target(0.04)
+    assert wait_for(lambda: emu.state()['moving'], 5.0)
+    assert wait_for(lambda: probe.status() is not None, 3.0)
+    pid = int(probe.status()[2]['pid'])
+    t_kill = time.monotonic()
+    os.kill(pid, signal.SIGKILL)  # a crash of the axis process: the node's spare takes over
+    assert wait_for(lambda: not emu.state()['busy'], 2.0)
+    assert time.monotonic() - t_kill < 1.5
+    assert wait_for(lambda: 'died (exit -9)' in (probe.status(t_kill) or (0, ''))[1], 4.0)
+    assert probe.status(t_kill)[0] == DiagnosticStatus.ERROR
+    assert probe.call('home').success
+    probe.target(0.002)
+    assert wait_for(lambda: truth(emu) == pytest.approx(0.002, abs=STEP_M), 5.0)
+
+
+def test_inserter_and_backbone_side_by_side_gcode_and_step1mm(tmp_path):
+    emus = StageEmulatorProcess(tmp_path / 'ports', axes=('inserter', 'backbone'),
+                                dialects=('gcode', 'step1mm'))
+    nodes = [start_node(tmp_path, emus.ports['inserter']),
+             start_node(tmp_path, emus.ports['backbone'], axis='backbone', dialect='step1mm',
+                        baud=9600)]
+    probe = AxisProbe(('inserter', 'backbone'))
+    try:
+        assert probe.call('home', 'inserter', timeout_s=20.0).success, nodes[0].output()
+        assert probe.call('home', 'backbone', timeout_s=20.0).success, nodes[1].output()
+        probe.target(0.006, 'inserter')
+        probe.target(0.003, 'backbone')
+        assert wait_for(lambda: emus.axis('inserter')['position_m'] == pytest.approx(
+            0.006, abs=STEP_M) and emus.axis('backbone')['position_m'] == pytest.approx(
+            0.003, abs=1e-9) and not emus.axis('backbone')['busy'], 10.0)
+        since = time.monotonic() + 0.2
+        assert wait_for(lambda: probe.position(since, 'backbone') is not None
+                        and probe.position(since, 'inserter') is not None, 3.0)
+        assert probe.position(since, 'backbone') == pytest.approx(0.003)   # counted
+        assert abs(probe.position(since, 'inserter') - 0.006) <= STEP_M   # read back
+        assert wait_for(lambda: probe.status(since, 'backbone') is not None, 3.0)
+        assert probe.status(since, 'backbone')[2]['position'].startswith('estimated')
+        commands = [e['command'] for e in emus.log('backbone')]
+        assert commands == ['stop', 'extend', 'extend', 'extend']
+        assert probe.call('stop', 'backbone').success
+        assert wait_for(lambda: [e['command'] for e in emus.log('backbone')][-1] == 'stop')
+    finally:
+        probe.close()
+        codes = [node.stop() for node in nodes]
+        emus.stop()
+    assert codes == [0, 0], [node.output() for node in nodes]

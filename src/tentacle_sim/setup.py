@@ -21,6 +21,7 @@ setup(
         'console_scripts': [
             'sim_node = tentacle_sim.sim_node:main',
             'supply_emulator = tentacle_sim.emulate_supplies:main',
+            'stage_emulator = tentacle_sim.emulate_stages:main',
         ],
     },
 )

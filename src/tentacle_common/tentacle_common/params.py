@@ -182,3 +182,35 @@ def check_ros_args(argv, node_name, table):
                 raise ConfigError(f'-p {name}: {exc}') from None
             argv[i + 1] = f'{owner + ":" if owner else ""}{name}:=' + json.dumps(value)
     return argv, warnings, rewrite
+
+
+def resolve(table, node_name, params_file=None, overrides=None):
+    """
+    Return {name: value} as a node would get them, for a tool that runs without ROS.
+
+    Defaults, then this node's section of a params file, then ``overrides``; each value is
+    checked against its row's type and range.
+
+    :raises ConfigError: a bad file, an unknown override, or a value of the wrong type or out
+        of range, named
+    """
+    by_name = {p.name: p for p in table}
+    values = {p.name: p.default for p in table}
+    if params_file is not None:
+        document, _, _ = check_params_file(params_file, node_name, table)
+        for section, body in document.items():
+            if _own_section(section, node_name):
+                values.update({k: v for k, v in body['ros__parameters'].items()
+                               if k in by_name})
+    for name, value in (overrides or {}).items():
+        if name not in by_name:
+            raise ConfigError(f'{name}: not a {node_name} parameter{_suggestion(name, table)}')
+        try:
+            values[name] = _coerce(by_name[name], value)
+        except ValueError as exc:
+            raise ConfigError(f'{name}: {exc}') from None
+    for name, value in values.items():
+        p = by_name[name]
+        if p.low is not None and not p.low <= value <= p.high:
+            raise ConfigError(f'{name}: {value!r} is outside [{p.low:g}, {p.high:g}]')
+    return values

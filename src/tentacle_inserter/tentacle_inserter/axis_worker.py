@@ -11,12 +11,14 @@ unhomed, its position read back, never assumed. ``snapshot()`` is what /<axis>/s
 /diagnostics publish.
 """
 
+import logging
 import threading
 
 from tentacle_common.errors import DriverError, LinkLost
 from tentacle_inserter.stage import check_target, MoveStopped, TargetRefused
 
 HOME_TIMEOUT_S = 10.0
+log = logging.getLogger('tentacle_inserter')
 
 
 class AxisWorker:
@@ -51,7 +53,8 @@ class AxisWorker:
         """
         Hand a target (m) to the worker; it replaces any not yet started.
 
-        :raises TargetRefused: not finite, out of range, or the estop holds (nothing sent)
+        :raises TargetRefused: not finite, out of range, the estop holds, disabled or not
+            homed (nothing sent)
         """
         try:
             target = check_target(target_m, self.stage.max_length_m)
@@ -60,6 +63,8 @@ class AxisWorker:
                     raise TargetRefused('estop active: no motion until it is released')
                 if not self._enabled:
                     raise TargetRefused('axis disabled: enable it first')
+                if not getattr(self.stage, 'homed', True):
+                    raise TargetRefused('not homed (after a connect or a stop): home it first')
                 self._target = target
                 self._cond.notify_all()
         except TargetRefused:
@@ -114,6 +119,12 @@ class AxisWorker:
                     'measured': self.stage.measured, 'estop': self._estop,
                     'enabled': self._enabled,
                     'error': self.error, 'moves': self.moves, 'refusals': self.refusals}
+
+    def idle(self):
+        """Return True when no target waits and no move, stop or home runs."""
+        with self._cond:
+            return (self._target is None and not self._moving and not self._stop
+                    and self._home is None)
 
     def status(self):
         """Return (level 'ok' | 'warn' | 'error', message) for /diagnostics."""
@@ -173,12 +184,14 @@ class AxisWorker:
                     self.error = ''
             except MoveStopped as exc:
                 self.error = str(exc)
+                log.warning('%s', exc)
                 with self._cond:
                     self._stop = False  # the stop that cut the move short is done
             except LinkLost as exc:
                 self._lost(exc, home)
             except DriverError as exc:
                 self.error = str(exc)
+                log.error('%s', exc)
                 if home is not None:
                     self._home_result = (False, str(exc))
                     home.set()
@@ -189,8 +202,10 @@ class AxisWorker:
 
     def _connect(self):
         try:
-            self.stage.connect()
+            position = self.stage.connect()
             self.connected, self.error = True, ''
+            log.info('connected: axis stopped at %.3f mm (%s)', position * 1e3,
+                     'read back; home it before moving' if self.stage.measured else 'counted')
         except (LinkLost, DriverError) as exc:
             self.error = f'connect: {exc}'
             self.stage.line.close()
@@ -199,6 +214,8 @@ class AxisWorker:
 
     def _lost(self, exc, home):
         self.connected, self.error = False, f'line lost: {exc}'
+        log.error('%s: reconnecting every %g s; the axis comes back stopped and unhomed',
+                  self.error, self.reconnect_s)
         self.stage.line.close()
         with self._cond:
             self._target = None  # a target from before the loss is never replayed

@@ -10,9 +10,11 @@ outside [0, max_length] is refused with a logged reason and never reaches the wi
 axis moves to the latest target only, a move that does not end in its expected time stops
 the axis, and after a stop or a lost line it must be homed again (home: "zero is here").
 A step1mm axis reports a counted position: /diagnostics says it is estimated. The axis logic
-is tentacle_inserter.axis_worker and stage (no rclpy); this module is the ROS glue.
+is tentacle_inserter.axis_worker and stage (no rclpy), run in a process of its own
+(axis_process) so that the axis stops however this node dies; this module is the ROS glue.
 """
 
+import logging
 import sys
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -21,37 +23,27 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
 from std_srvs.srv import SetBool, Trigger
-from tentacle_common.driver_node import declare_parameters, diagnostic_status, run_node
-from tentacle_common.errors import ConfigError
-from tentacle_common.serial_line import SerialLine
-from tentacle_inserter import stage, step1mm
-from tentacle_inserter.axis_worker import AxisWorker
+from tentacle_common.driver_node import (declare_parameters, diagnostic_status,
+                                         RosLogHandler, run_node)
+from tentacle_inserter.axis_process import AxisClient, LOGGER
 from tentacle_inserter.params import INSERTER_PARAMS, NODE_NAME
-
-
-def make_stage(p):
-    """Return the axis driver the parameters describe (not connected)."""
-    line = SerialLine(p['port'], p['baud'])
-    if p['dialect'] == 'gcode':
-        return stage.GcodeStage(line, max_length_m=p['max_length'], max_speed_m_s=p['max_speed'],
-                                accel_m_s2=p['acceleration'], steps_per_mm=p['steps_per_mm'],
-                                reply_timeout_s=p['reply_timeout_s'], retries=p['retries'],
-                                time_margin=p['time_margin'], slack_s=p['slack_s'])
-    if p['dialect'] == 'step1mm':
-        mapping = step1mm.Mapping(p['step1mm_extend'], p['step1mm_retract'], p['step1mm_stop'])
-        return stage.Step1mmStage(line, max_length_m=p['max_length'], mapping=mapping)
-    raise ConfigError(f"dialect {p['dialect']!r} is not gcode or step1mm")
+from tentacle_inserter.stage import TargetRefused
 
 
 class InserterNode(Node):
     """The ROS side of one axis."""
 
     def __init__(self):
-        """Declare the parameters, start the axis worker, wire topics and services."""
+        """Declare the parameters, start the axis process, wire topics and services."""
         super().__init__(NODE_NAME)
         p = declare_parameters(self, INSERTER_PARAMS)
         self.axis = p['axis'].strip('/')
-        self.worker = AxisWorker(make_stage(p)).start()
+        logger = logging.getLogger(LOGGER)
+        logger.addHandler(RosLogHandler(self.get_logger()))
+        logger.setLevel(logging.INFO)
+        # The axis runs in its own process (axis_process.py): it stops the axis if this
+        # process dies, however it dies.
+        self.client = AxisClient({**p, 'axis': self.axis}, on_refused=self._refused)
         self.port, self.dialect = p['port'], p['dialect']
         ns = f'/{self.axis}'
         self.state_pub = self.create_publisher(JointState, f'{ns}/state', 10)
@@ -67,39 +59,42 @@ class InserterNode(Node):
         self.create_timer(1.0, self.publish_diagnostics)
 
     def on_target(self, msg):
-        """Hand a target to the worker, or log why it is refused."""
+        """Hand a target to the axis, or log why it is refused."""
         try:
-            self.worker.set_target(msg.data)
-        except stage.TargetRefused as exc:
-            self.get_logger().warning(f'{self.axis}: target refused: {exc}')
+            self.client.set_target(msg.data)
+        except TargetRefused as exc:
+            self._refused(str(exc))
+
+    def _refused(self, reason):
+        self.get_logger().warning(f'{self.axis}: target refused: {reason}')
 
     def on_estop(self, msg):
         """Engage or release the estop."""
-        self.worker.set_estop(msg.data)
+        self.client.set_estop(msg.data)
         if msg.data:
             self.get_logger().warning(f'{self.axis}: estop: axis stopped, targets refused')
 
     def on_stop(self, _request, response):
         """Stop now."""
-        self.worker.stop()
+        self.client.stop()
         response.success, response.message = True, 'stopping: home again before moving'
         return response
 
     def on_enable(self, request, response):
         """Enable (targets taken) or disable (stop, motor off, targets refused)."""
-        self.worker.set_enabled(request.data)
+        self.client.set_enabled(request.data)
         response.success = True
         response.message = 'enabled' if request.data else 'stopping, motor off, targets refused'
         return response
 
     def on_home(self, _request, response):
         """Make where the axis stands its zero."""
-        response.success, response.message = self.worker.home()
+        response.success, response.message = self.client.home()
         return response
 
     def publish_state(self):
         """Publish position and velocity (nothing while the position is unknown)."""
-        snap = self.worker.snapshot()
+        snap = self.client.snapshot()
         if snap['position_m'] is None:
             return
         msg = JointState(name=[self.axis], position=[float(snap['position_m'])],
@@ -109,8 +104,8 @@ class InserterNode(Node):
 
     def publish_diagnostics(self):
         """Publish one status for the axis."""
-        snap = self.worker.snapshot()
-        level, message = self.worker.status()
+        snap = self.client.snapshot()
+        level, message = self.client.status()
         values = {**snap, 'position': 'measured' if snap['measured']
                   else 'estimated (counted, no readback)', 'dialect': self.dialect}
         msg = DiagnosticArray(status=[diagnostic_status(f'{NODE_NAME}: {self.axis}', self.port,
@@ -120,7 +115,7 @@ class InserterNode(Node):
 
     def shutdown(self):
         """Stop the axis and close the line; return whether the stop was answered."""
-        return self.worker.shutdown()
+        return self.client.shutdown()
 
 
 def main(args=None):

@@ -115,9 +115,15 @@ class GcodeStage:
 
     # -- life cycle -------------------------------------------------------------------------
     def connect(self):
-        """Open the line, set absolute mode and the calibration, read the position back."""
+        """
+        Open the line, halt whatever runs, set absolute mode and the calibration; read back.
+
+        The halt first: a move queued before a line loss, or by a driver process that died,
+        may still be running, and nobody is waiting for it any more.
+        """
         self.line.open()
         self.attempts.resync()
+        self._halt()
         self._command(gcode.absolute())
         self._command(gcode.steps_per_mm(self.steps_per_mm))
         self.homed = False
@@ -154,8 +160,10 @@ class GcodeStage:
                                   'homed again')
         except (ReplyTimeout, Refused) as exc:
             self.stop()
-            raise MoveFailed(f'move to {target * 1e3:.3f} mm did not finish in {allowed:.2f} s'
-                             f' ({exc}): the axis is stopped and must be homed again') from None
+            why = (f'did not finish in {allowed:.2f} s' if isinstance(exc, ReplyTimeout)
+                   else 'failed')
+            raise MoveFailed(f'move to {target * 1e3:.3f} mm {why} ({exc}): the axis is '
+                             'stopped and must be homed again') from None
         finally:
             self._motion = None
         return self.read_position()
@@ -181,7 +189,12 @@ class GcodeStage:
         self.homed = False
 
     def _wait_for_motion(self, allowed_s, cancelled):
-        """Send M400; return True at its ok, False once cancelled (ReplyTimeout past allowed)."""
+        """
+        Send M400; return True at its ok, False once cancelled.
+
+        :raises ReplyTimeout: no ok within allowed_s
+        :raises Refused: an error, or the firmware restarted (it says start)
+        """
         self.line.write(gcode.wait_for_motion())
         deadline = self.line.now() + allowed_s
         while not cancelled():
@@ -192,17 +205,23 @@ class GcodeStage:
                     return True
                 if kind == 'error':
                     raise Refused(f'M400: {value}')
+                if kind == 'start':  # it rebooted: the move is forgotten, its count is 0
+                    raise Refused('the firmware restarted during the move')
             elif self.line.now() >= deadline:
                 raise ReplyTimeout(f'no ok to M400 in {allowed_s:.2f} s')
         return False
 
     def stop(self):
         """Halt at once (M112), reset (M999), read the count back; unhome; return it (m)."""
+        self._halt()
+        return self.read_position()
+
+    def _halt(self):
+        """Halt (M112) and reset (M999): the axis stands, unhomed."""
         self.line.write(gcode.halt())   # Marlin answers nothing to M112
         self.homed, self._motion = False, None
         self.attempts.out_of_step = True  # drop whatever a halted firmware still says
         self._command(gcode.reset())
-        return self.read_position()
 
 
 class Step1mmStage:

@@ -16,12 +16,11 @@ answers each JSON line on stdin with one on stdout:
 """
 
 import argparse
-import json
 import os
-import signal
 import sys
 
 from tentacle_sim.coil_load import CoilLoad
+from tentacle_sim.emulator_control import serve_devices
 from tentacle_sim.supply_emulator import EmulatedSupply
 
 
@@ -46,24 +45,6 @@ def build_parser():
     return parser
 
 
-def handle(request, supplies):
-    """Return the reply to one control request."""
-    op = request.get('op')
-    if op == 'state':
-        return {name: emu.state() for name, emu in supplies.items()}
-    if op in ('fault', 'log'):
-        emu = supplies.get(request.get('port'))
-        if emu is None:
-            return {'error': f"no port {request.get('port')!r}; have {sorted(supplies)}"}
-        if op == 'log':
-            since = float(request.get('since', 0.0))
-            return {'log': [e for e in list(emu.log) if e['t'] >= since]}
-        options = {k: v for k, v in request.items() if k not in ('op', 'port', 'kind')}
-        emu.inject(request.get('kind'), **options)
-        return {'ok': True}
-    return {'error': f'unknown op {op!r}'}
-
-
 def main(args=None):
     """Start the supplies and serve control requests until told to stop."""
     opts = build_parser().parse_args(args)
@@ -81,26 +62,7 @@ def main(args=None):
             polarity_mode=opts.polarity_mode, delay_s=opts.delay_s,
             max_current_a=opts.max_current_a, log_path=log_path,
             load=CoilLoad(opts.resistance_ohm, opts.inductance_h, opts.compliance_v)).start()
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
-    print(json.dumps({'ready': True, 'ports': {n: e.port for n, e in supplies.items()}}),
-          flush=True)
-    try:
-        for line in sys.stdin:
-            if not line.strip():
-                continue
-            try:
-                request = json.loads(line)
-                if request.get('op') == 'quit':
-                    break
-                reply = handle(request, supplies)
-            except (ValueError, TypeError) as exc:
-                reply = {'error': str(exc)}
-            print(json.dumps(reply), flush=True)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        for emu in supplies.values():
-            emu.stop()
+    serve_devices(supplies)
 
 
 if __name__ == '__main__':

@@ -110,6 +110,14 @@ class ScriptedLine:
     def _arrived(self):
         return sum(1 for t, _ in self._incoming if t <= self._clock)
 
+    def wait_input(self, deadline):
+        """Return True once a byte has arrived (none taken), False at the deadline."""
+        if self._incoming and self._incoming[0][0] <= deadline:
+            self._clock = max(self._clock, self._incoming[0][0])
+            return True
+        self._clock = max(self._clock, deadline)
+        return False
+
     def read_until(self, terminator, deadline, max_bytes=256):
         """Return the bytes up to and including terminator, or raise ReplyTimeout."""
         line = bytearray()

@@ -10,8 +10,9 @@ codecs of tentacle_inserter so driver and emulator share the wire:
   when motion has finished (commands sent meanwhile are answered at once: our driver waits
   for each reply, and Marlin would hold them); ``M114`` reports the position; ``M112`` stops
   the axis where it is and answers every later line with Marlin's halted error until
-  ``M999`` or, with ``reset_after_halt_s``, until the firmware restarts by itself (it then
-  says ``start`` and counts from 0 again, as a rebooted board does).
+  ``M999`` (which resumes, count and settings kept) or, with ``reset_after_halt_s``, until
+  the firmware restarts by itself (it then says ``start`` and counts from 0 where the axis
+  stands, as a rebooted board does; the axis itself does not move).
 - Step1mmStage: the reference rig's inserter (tentacle_inserter.step1mm): each character
   moves 1 mm (or stops), nothing is ever answered.
 
@@ -19,8 +20,9 @@ Faults beyond the line's (``inject``): ``slow`` (moves from now on run at ``fact
 their speed; 1 restores it), ``stall`` (the axis stops advancing, after ``after_m`` more
 travel, and M400 never answers), ``reset`` (the firmware restarts now), with the line's
 ``drop_reply`` (a missing ``ok``), ``no_reply`` (a lost line), ``garble``, ``late`` and
-``disconnect``. ``state()`` is the truth a test checks the driver
-against: position, velocity, moving, halted.
+``disconnect``. ``state()`` is the truth a test checks the driver against: position
+(``position_m`` in the firmware's count, what a driver should report; ``travel_m`` where
+the physical axis is, from power-on), velocity, moving, halted.
 """
 
 import threading
@@ -101,13 +103,16 @@ class GcodeStage(PtyDevice):
                          log_path=log_path)
         self.accel_m_s2 = accel_m_s2
         self.reset_after_halt_s = reset_after_halt_s
+        self.boot_steps_per_mm = steps_per_mm
         self._state_lock = threading.Lock()
-        self._boot(steps_per_mm)
+        self.axis = _Axis(accel_m_s2, steps_per_mm * 1e3)  # the physical axis: it stays put
+        self._boot(0.0)
 
-    def _boot(self, steps_per_mm=None):
-        """Power-on state: at 0, absolute, motor on, not halted."""
-        spm = steps_per_mm or self.axis.steps_per_m * 1e-3
-        self.axis = _Axis(self.accel_m_s2, spm * 1e3)
+    def _boot(self, now):
+        """(Re)start: motion stopped, counting from 0 where the axis stands, absolute."""
+        self.axis.stop(now)
+        self.axis.steps_per_m = self.boot_steps_per_mm * 1e3
+        self.origin_m = self.axis.rest_m  # the firmware's 0, on the physical axis (m)
         self.relative = False
         self.motor_on = True
         self.halted_at = None
@@ -115,7 +120,8 @@ class GcodeStage(PtyDevice):
         self._announce = False    # 'start' to say
 
     # -- faults -----------------------------------------------------------------------------
-    def inject(self, kind, count=1, late_s=0.2, duration_s=1.0, factor=0.5, after_m=0.0):
+    def inject(self, kind, count=1, late_s=0.2, duration_s=1.0, match=None, factor=0.5,
+               after_m=0.0):
         """
         Arm a fault.
 
@@ -133,10 +139,10 @@ class GcodeStage(PtyDevice):
                 self.axis.stall_at_m = position + ahead * after_m
                 return
             if kind == 'reset':
-                self._boot()
+                self._boot(time.monotonic())
                 self._announce = True
                 return
-        super().inject(kind, count, late_s, duration_s)
+        super().inject(kind, count, late_s, duration_s, match)
 
     def state(self):
         """Return the truth: position (m), velocity (m/s), moving; busy (motion left), halted."""
@@ -145,7 +151,8 @@ class GcodeStage(PtyDevice):
             position, velocity = self.axis.where(now)
             return {'name': self.name, 'connected': self.connected,
                     'port': self.port if self.connected or self.link_path else None,
-                    'position_m': position, 'velocity_m_s': velocity,
+                    'position_m': position - self.origin_m, 'travel_m': position,
+                    'velocity_m_s': velocity,
                     'moving': velocity != 0.0, 'busy': not self.axis.idle(now),
                     'stalled': self.axis.stalled, 'halted': self.halted_at is not None,
                     'motor_on': self.motor_on, 'steps_per_mm': self.axis.steps_per_m * 1e-3,
@@ -159,6 +166,10 @@ class GcodeStage(PtyDevice):
             return ('drop', len(buf)) if len(buf) > 256 else ('wait', 0)
         return 'request', end + 1
 
+    def matches(self, request, match):
+        """Return whether a fault armed for command ``match`` (e.g. 'G1') applies."""
+        return match is None or request.split()[:1] == [match.encode()]
+
     def garble(self, reply):
         """Return a line of noise."""
         return b'o\xfek\n'
@@ -169,7 +180,7 @@ class GcodeStage(PtyDevice):
             now = time.monotonic()
             if (self.halted_at is not None and self.reset_after_halt_s is not None
                     and now - self.halted_at >= self.reset_after_halt_s):
-                self._boot()
+                self._boot(now)
                 self._announce = True
             if self._announce:
                 self._announce = False
@@ -196,7 +207,7 @@ class GcodeStage(PtyDevice):
                 return meaning, None  # Marlin halts without an answer
             if self.halted_at is not None:
                 if code == 'M999':
-                    self._boot()
+                    self.halted_at = None  # running again; the count and settings kept
                     return meaning, gcode.OK
                 return meaning, gcode.format_error(gcode.HALTED)
             return meaning, self._execute(code, values, now)
@@ -209,7 +220,7 @@ class GcodeStage(PtyDevice):
         elif code == 'G92':
             if not axis.idle(now):
                 return gcode.format_error('G92 while moving')
-            axis.rest_m = values.get('E', 0.0) * 1e-3
+            self.origin_m = axis.rest_m - values.get('E', 0.0) * 1e-3
         elif code == 'G1':
             if 'E' not in values:
                 return gcode.OK  # only a feed rate: nothing moves
@@ -217,7 +228,7 @@ class GcodeStage(PtyDevice):
             if not speed > 0:
                 return gcode.format_error('feed rate must be positive')
             base = (axis.queue[-1][0] if axis.queue else axis.move[1] if axis.move
-                    else axis.rest_m) if self.relative else 0.0
+                    else axis.rest_m) if self.relative else self.origin_m
             self.motor_on = True  # a move enables the motor again, as Marlin's does
             axis.queue.append((base + values['E'] * 1e-3, speed))
             axis.where(now)  # start it now if idle
@@ -226,7 +237,7 @@ class GcodeStage(PtyDevice):
                 self._waiting = True
                 return None
         elif code == 'M114':
-            return gcode.format_position(axis.where(now)[0] * 1e3) + gcode.OK
+            return gcode.format_position((axis.where(now)[0] - self.origin_m) * 1e3) + gcode.OK
         elif code == 'M92':
             if 'E' not in values or not values['E'] > 0:
                 return gcode.format_error('M92 needs E > 0')

@@ -67,15 +67,22 @@ def test_m112_stops_at_once_and_holds_until_reset(stage):
     assert gcode.parse_reply(ask(fd, gcode.move(0.03, 0.01))) == ('error', gcode.HALTED)
     time.sleep(0.2)
     assert dev.state()['position_m'] == halted['position_m']        # nothing moved
-    assert ask(fd, gcode.reset()) == b'ok\n'
-    assert dev.state()['position_m'] == 0.0 and not dev.state()['halted']  # counts from 0
+    assert ask(fd, gcode.reset()) == b'ok\n'                      # M999: running again,
+    assert dev.state()['position_m'] == halted['position_m']        # its count kept
+    assert not dev.state()['halted']
 
 
 def test_a_firmware_that_restarts_by_itself_after_a_halt_says_start(stage):
     dev, fd = stage(reset_after_halt_s=0.2)
+    ask(fd, gcode.move(0.002, 0.01))
+    time.sleep(0.3)
     os.write(fd, gcode.halt())
     assert read_line(fd, 1.0) == b'start\n'
+    stood = dev.state()['travel_m']
+    assert stood > 0.0005 and dev.state()['position_m'] == 0.0  # counts from 0 where it stands
     assert ask(fd, gcode.move(0.001, 0.01)) == b'ok\n'
+    time.sleep(0.5)
+    assert dev.state()['travel_m'] == pytest.approx(stood + 0.001, abs=1e-5)
 
 
 def test_a_stall_stops_the_axis_and_m400_never_answers(stage):
@@ -97,6 +104,7 @@ def test_a_lost_ok_and_a_restart_now(stage):
     assert dev.state()['position_m'] == pytest.approx(0.001)
     dev.inject('reset')
     assert read_line(fd) == b'start\n' and dev.state()['position_m'] == 0.0
+    assert dev.state()['travel_m'] == pytest.approx(0.001)             # the axis did not move
     assert dev.log[0]['fault'] == 'drop_reply'
 
 

@@ -1,0 +1,135 @@
+"""
+Protocol tests: the stage drivers against scripted exchanges on a virtual clock.
+
+Each test lists the exact lines the driver must send and what the firmware answers, and
+when (DESIGN.md's gcode, the lab's step1mm); the line fails on any other request and on
+anything left over. The emulator shares the codec; these tests hold the driver to the wire.
+"""
+
+import pytest
+from tentacle_inserter import stage, step1mm
+from tentacle_inserter.trapezoid import move_time_s
+from tentacle_sim.scripted_line import Exchange, ScriptedLine, ScriptError
+
+SPEED, ACCEL = 0.005, 0.5
+OK = b'ok\n'
+CONNECT = [Exchange(b'M112\n'),                           # halt whatever still runs
+           Exchange(b'M999\n', OK), Exchange(b'G90\n', OK),
+           Exchange(b'M92 E100.00000\n', OK),
+           Exchange(b'M114\n', b'X:0.00 Y:0.00 Z:0.00 E:3.2100 Count X:0 Y:0 Z:0\n' + OK)]
+HOME = [Exchange(b'G92 E0.0000\n', OK),
+        Exchange(b'M114\n', b'X:0.00 Y:0.00 Z:0.00 E:0.0000\n' + OK)]
+
+
+def gcode_axis(script, **kwargs):
+    line = ScriptedLine(script, baud=115200)
+    options = {'max_length_m': 0.05, 'max_speed_m_s': SPEED, 'accel_m_s2': ACCEL,
+               'steps_per_mm': 100.0, 'reply_timeout_s': 0.2, 'time_margin': 1.5,
+               'slack_s': 0.5, **kwargs}
+    return stage.GcodeStage(line, **options), line
+
+
+def test_connect_halts_first_then_reads_the_position_back_unhomed():
+    axis, line = gcode_axis(CONNECT)
+    assert axis.connect() == pytest.approx(0.00321)
+    line.finish()
+    assert not axis.homed
+    with pytest.raises(stage.NotHomed):
+        axis.move_to(0.01)          # nothing more on the wire: the script has ended
+
+
+def test_a_move_is_one_absolute_line_waited_for_and_read_back():
+    t_move = move_time_s(0.01, SPEED, ACCEL)
+    axis, line = gcode_axis(CONNECT + HOME + [
+        Exchange(b'G1 E10.0000 F300.00\n', OK),
+        Exchange(b'M400\n', OK, after_s=t_move),
+        Exchange(b'M114\n', b'X:0.00 Y:0.00 Z:0.00 E:10.0000\n' + OK)])
+    axis.connect()
+    axis.home()
+    t0 = line.now()
+    assert axis.move_to(0.01) == pytest.approx(0.01)
+    line.finish()
+    assert line.now() - t0 == pytest.approx(t_move, abs=0.01)
+
+
+def test_an_ok_that_never_comes_to_m400_stops_the_axis_in_its_allowed_time():
+    t_move = move_time_s(0.01, SPEED, ACCEL)
+    allowed = t_move * 1.5 + 0.5
+    axis, line = gcode_axis(CONNECT + HOME + [
+        Exchange(b'G1 E10.0000 F300.00\n', OK),
+        Exchange(b'M400\n'),                              # the axis stalled: never an ok
+        Exchange(b'M112\n'), Exchange(b'M999\n', OK),
+        Exchange(b'M114\n', b'X:0.00 Y:0.00 Z:0.00 E:4.2000\n' + OK)])
+    axis.connect()
+    axis.home()
+    t0 = line.now()
+    with pytest.raises(stage.MoveFailed, match='did not finish'):
+        axis.move_to(0.01)
+    line.finish()
+    assert allowed <= line.now() - t0 < allowed + 0.5     # waited its time, then stopped
+    assert axis.position_m == pytest.approx(0.0042) and not axis.homed
+
+
+def test_a_lost_ok_to_a_move_resends_the_same_absolute_line():
+    t_move = move_time_s(0.002, SPEED, ACCEL)
+    move = b'G1 E2.0000 F300.00\n'
+    axis, line = gcode_axis(CONNECT + HOME + [
+        Exchange(move), Exchange(move, OK),               # the first ok was lost
+        Exchange(b'M400\n', OK, after_s=t_move),
+        Exchange(b'M114\n', b'X:0.00 Y:0.00 Z:0.00 E:2.0000\n' + OK)])
+    axis.connect()
+    axis.home()
+    assert axis.move_to(0.002) == pytest.approx(0.002)
+    line.finish()
+
+
+def test_a_cancelled_move_halts_resets_and_unhomes():
+    polls = []
+
+    def cancelled():
+        polls.append(line.now())
+        return len(polls) > 3
+
+    axis, line = gcode_axis(CONNECT + HOME + [
+        Exchange(b'G1 E40.0000 F300.00\n', OK),
+        Exchange(b'M400\n'),                              # answered at the end: never
+        Exchange(b'M112\n'), Exchange(b'M999\n', OK),
+        Exchange(b'M114\n', b'X:0.00 Y:0.00 Z:0.00 E:0.1000\n' + OK)])
+    axis.connect()
+    axis.home()
+    with pytest.raises(stage.MoveStopped):
+        axis.move_to(0.04, cancelled=cancelled)
+    line.finish()
+    assert len(polls) == 4 and polls[-1] - polls[0] == pytest.approx(3 * stage.POLL_S)
+    assert axis.position_m == pytest.approx(0.0001) and not axis.homed
+
+
+def test_a_refusal_is_reported_not_retried_for_ever():
+    axis, line = gcode_axis(CONNECT + [Exchange(b'G92 E0.0000\n', b'Error:busy\n')] * 3,
+                            retries=2)
+    axis.connect()
+    with pytest.raises(stage.DriverError, match='failed after 3 attempts'):
+        axis.home()
+    line.finish()
+    assert not axis.homed
+
+
+def test_the_script_fails_on_a_line_the_firmware_was_not_sent():
+    axis, line = gcode_axis([Exchange(b'G91\n', OK)])
+    line.open()
+    with pytest.raises(ScriptError, match='the script expects'):
+        axis.connect()
+
+
+@pytest.mark.parametrize('mapping, extend, retract', [
+    (step1mm.Mapping(), b'2', b'1'), (step1mm.EARLIER, b'1', b'2')])
+def test_step1mm_sends_a_character_a_millimetre_and_expects_nothing(mapping, extend, retract):
+    line = ScriptedLine([Exchange(b'3'), Exchange(extend * 3), Exchange(retract)]
+                        + [Exchange(b'3')], baud=step1mm.BAUD)
+    axis = stage.Step1mmStage(line, max_length_m=0.05, mapping=mapping)
+    axis.connect()                                        # a stop first
+    assert axis.move_to(0.0031) == pytest.approx(0.003)
+    assert axis.move_to(0.002) == pytest.approx(0.002)
+    assert axis.stop() == pytest.approx(0.002)            # counted: what was sent
+    line.finish()
+    assert not axis.measured and axis.estimate() == (pytest.approx(0.002), 0.0, False)

@@ -1,0 +1,57 @@
+"""
+The control loop of an emulator process: JSON lines on stdin, one reply each on stdout.
+
+supply_emulator and stage_emulator run their devices (pty_device.PtyDevice models) and then
+``serve_devices``: it prints ``{"ready": true, "ports": {name: path}}`` and answers
+
+- ``{"op": "state"}`` -> every device's ``state()``, by name
+- ``{"op": "fault", "port": <name>, "kind": ..., ...}`` -> ``inject(kind, ...)`` on one
+- ``{"op": "log", "port": <name>, "since": t}`` -> its received requests since a time
+- ``{"op": "quit"}``; end of stdin or SIGTERM also stop it and remove the ports.
+"""
+
+import json
+import signal
+import sys
+
+
+def handle(request, devices):
+    """Return the reply to one control request."""
+    op = request.get('op')
+    if op == 'state':
+        return {name: emu.state() for name, emu in devices.items()}
+    if op in ('fault', 'log'):
+        emu = devices.get(request.get('port'))
+        if emu is None:
+            return {'error': f"no port {request.get('port')!r}; have {sorted(devices)}"}
+        if op == 'log':
+            since = float(request.get('since', 0.0))
+            return {'log': [e for e in list(emu.log) if e['t'] >= since]}
+        options = {k: v for k, v in request.items() if k not in ('op', 'port', 'kind')}
+        emu.inject(request.get('kind'), **options)
+        return {'ok': True}
+    return {'error': f'unknown op {op!r}'}
+
+
+def serve_devices(devices, stdin=sys.stdin):
+    """Announce the devices' ports, answer control requests until told to stop, stop them."""
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
+    print(json.dumps({'ready': True, 'ports': {n: e.port for n, e in devices.items()}}),
+          flush=True)
+    try:
+        for line in stdin:
+            if not line.strip():
+                continue
+            try:
+                request = json.loads(line)
+                if request.get('op') == 'quit':
+                    break
+                reply = handle(request, devices)
+            except (ValueError, TypeError) as exc:
+                reply = {'error': str(exc)}
+            print(json.dumps(reply), flush=True)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        for emu in devices.values():
+            emu.stop()

@@ -43,7 +43,8 @@ def make_stage(p):
                                 time_margin=p['time_margin'], slack_s=p['slack_s'])
     if p['dialect'] == 'step1mm':
         mapping = step1mm.Mapping(p['step1mm_extend'], p['step1mm_retract'], p['step1mm_stop'])
-        return stage.Step1mmStage(line, max_length_m=p['max_length'], mapping=mapping)
+        return stage.Step1mmStage(line, max_length_m=p['max_length'], mapping=mapping,
+                                  speed_m_s=p['max_speed'], accel_m_s2=p['acceleration'])
     raise ConfigError(f"dialect {p['dialect']!r} is not gcode or step1mm")
 
 

@@ -16,7 +16,8 @@ INSERTER_PARAMS = (
     Param('baud', 115200, 'serial line rate, bit/s (step1mm: 9600)', 300, 4_000_000),
     Param('axis', 'inserter', 'topic namespace: /<axis>/target, /<axis>/state, ...'),
     Param('max_length', 0.1, 'soft limit: targets in [0, max_length], metre', 0.0, 10.0),
-    Param('max_speed', 0.005, 'speed of every move, metre per second', 1e-6, 1.0),
+    Param('max_speed', 0.005, 'speed of every move, metre per second (step1mm: the '
+          "firmware's own, for the moves' expected time)", 1e-6, 1.0),
     Param('acceleration', 0.5, "the firmware's acceleration, metre per second squared",
           1e-6, 100.0),
     Param('steps_per_mm', 100.0, 'gcode: motor steps per mm, sent with M92 at connect',

@@ -23,6 +23,7 @@ from tentacle_inserter import gcode, step1mm
 from tentacle_inserter.trapezoid import move_time_s, position_at
 
 POLL_S = 0.01  # how often a waiting move looks whether it was cancelled (s)
+STEP1MM_SETTLE_S = 0.02  # a step1mm move is waited for this beyond its expected time (s)
 
 
 class TargetRefused(DriverError):
@@ -225,14 +226,23 @@ class GcodeStage:
 
 
 class Step1mmStage:
-    """The reference rig's inserter: a character per 1 mm, no reply; a counted position."""
+    """
+    The reference rig's inserter: a character per 1 mm, no reply; a counted position.
+
+    A move is waited for its expected time (1 mm moves at the firmware's speed and
+    acceleration, which the parameters must match), so the next target follows it; a
+    cancelled move sends the stop character and counts where the profile had got to.
+    """
 
     measured = False  # no readback: the position is counted
 
-    def __init__(self, line, *, max_length_m, mapping=step1mm.Mapping(), start_m=0.0):
-        """Bind to a line; the position is counted from start_m (m)."""
+    def __init__(self, line, *, max_length_m, mapping=step1mm.Mapping(), speed_m_s=0.005,
+                 accel_m_s2=0.5, start_m=0.0):
+        """Bind to a line; the firmware moves at speed_m_s (m/s); count from start_m (m)."""
         self.line, self.max_length_m, self.mapping = line, float(max_length_m), mapping
+        self.step_time_s = move_time_s(step1mm.STEP_M, speed_m_s, accel_m_s2)
         self.position_m = float(start_m)
+        self._motion = None  # (start m, end m, when it began s, how long it takes s)
 
     def connect(self):
         """Open the line and stop whatever may be going on."""
@@ -245,19 +255,33 @@ class Step1mmStage:
         self.position_m = 0.0
         return self.position_m
 
-    def move_to(self, target_m, cancelled=None):
+    def move_to(self, target_m, cancelled=lambda: False):
         """
-        Send the 1 mm steps towards target_m (rounded to whole mm); return the counted position.
+        Send the 1 mm steps towards target_m (whole mm) and wait their expected time.
 
-        Nothing comes back to wait for: the characters are sent at once (cancelled unused).
-
+        :return: the counted position (m)
         :raises TargetRefused: before anything is sent
+        :raises MoveStopped: cancelled: the stop character was sent
         """
         target = check_target(target_m, self.max_length_m)
         steps = round((target - self.position_m) / step1mm.STEP_M)
-        if steps:
-            self.line.write(self.mapping.command(1 if steps > 0 else -1) * abs(steps))
-            self.position_m += steps * step1mm.STEP_M
+        if not steps:
+            return self.position_m
+        start, end = self.position_m, self.position_m + steps * step1mm.STEP_M
+        began = self.line.write(self.mapping.command(1 if steps > 0 else -1) * abs(steps))
+        self._motion = (start, end, began, abs(steps) * self.step_time_s)
+        try:
+            deadline = began + self._motion[3] + STEP1MM_SETTLE_S
+            while self.line.now() < deadline:
+                if cancelled():
+                    self.position_m = self.estimate()[0]
+                    self.stop()
+                    raise MoveStopped(f'move to {end * 1e3:.0f} mm stopped near '
+                                      f'{self.position_m * 1e3:.1f} mm (counted)')
+                self.line.wait_input(min(deadline, self.line.now() + POLL_S))  # nothing comes
+            self.position_m = end
+        finally:
+            self._motion = None
         return self.position_m
 
     def motor_off(self):
@@ -265,8 +289,14 @@ class Step1mmStage:
         self.stop()
 
     def estimate(self, now=None):
-        """Return (counted position m, 0.0, False): never measured."""
-        return self.position_m, 0.0, False
+        """Return (counted position m, velocity m/s, False): never measured."""
+        motion = self._motion
+        if motion is None:
+            return self.position_m, 0.0, False
+        start, end, began, duration = motion
+        done = min(max(((self.line.now() if now is None else now) - began) / duration, 0.0),
+                   1.0)
+        return start + (end - start) * done, (end - start) / duration if done < 1 else 0.0, False
 
     def stop(self):
         """Send the stop character; return the counted position (what was sent, not done)."""

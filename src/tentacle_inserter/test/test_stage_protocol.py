@@ -133,3 +133,16 @@ def test_step1mm_sends_a_character_a_millimetre_and_expects_nothing(mapping, ext
     assert axis.stop() == pytest.approx(0.002)            # counted: what was sent
     line.finish()
     assert not axis.measured and axis.estimate() == (pytest.approx(0.002), 0.0, False)
+
+
+def test_step1mm_waits_each_move_its_time_and_a_cancel_counts_where_it_got():
+    per_mm = move_time_s(0.001, SPEED, ACCEL)
+    line = ScriptedLine([Exchange(b'3'), Exchange(b'2222'), Exchange(b'3')],
+                        baud=step1mm.BAUD)
+    axis = stage.Step1mmStage(line, max_length_m=0.05, speed_m_s=SPEED, accel_m_s2=ACCEL)
+    axis.connect()
+    t0 = line.now()
+    with pytest.raises(stage.MoveStopped, match='stopped near 2.0 mm'):
+        axis.move_to(0.004, cancelled=lambda: line.now() - t0 >= 2 * per_mm)
+    line.finish()
+    assert axis.position_m == pytest.approx(0.002, abs=0.0002)   # the profile's, counted

@@ -162,28 +162,26 @@ class AxisClient(ChildClient):
             self.refusals += 1
             raise
 
-    def stop(self):
-        """Stop now (a process being replaced halts the axis by itself)."""
+    def _tell(self, **request):
+        """Send a request that a process being replaced needs not get: it starts halted."""
         try:
-            self.send(op='stop')
+            self.send(**request)
         except TargetRefused:
-            pass
+            pass  # on_started carries the estop and a disable over to the replacement
+
+    def stop(self):
+        """Stop now."""
+        self._tell(op='stop')
 
     def set_estop(self, active):
         """Engage or release the estop (carried over to a replacement process)."""
         self._estop = bool(active)
-        try:
-            self.send(op='estop', active=self._estop)
-        except TargetRefused:
-            pass
+        self._tell(op='estop', active=self._estop)
 
     def set_enabled(self, on):
         """Enable, or disable: stop, motor off, targets refused (carried over)."""
         self._enabled = bool(on)
-        try:
-            self.send(op='enable', on=self._enabled)
-        except TargetRefused:
-            pass
+        self._tell(op='enable', on=self._enabled)
 
     def home(self, timeout_s=HOME_TIMEOUT_S):
         """Make where the axis stands its zero; return (success, message)."""

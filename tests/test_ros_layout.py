@@ -29,6 +29,7 @@ EXECUTABLES = {  # DESIGN.md, "Packages" ('-': a package without executables)
 }
 MORE_EXECUTABLES = {  # ours beyond DESIGN.md's table
     'tentacle_coils': ['calibrate_coils'],
+    'tentacle_sim': ['stage_emulator'],
 }
 COLCON = str(pathlib.Path(sys.executable).parent / 'colcon')
 
@@ -126,6 +127,33 @@ def test_coils_node_starts_and_stops_cleanly_from_the_install(workspace, tmp_pat
         out, _ = node.communicate(timeout=20)
         assert node.returncode == 0, out
         assert 'outputs zero and off' in out
+    finally:
+        for proc in (node, emulator):
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+
+
+def test_inserter_node_runs_its_axis_process_from_the_install(workspace, tmp_path):
+    layout, install = workspace
+    env = {k: os.environ[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')}
+    emulator = sourced(install, f'{ROOT}/scripts/ros2_run tentacle_sim stage_emulator '
+                       f'--link-dir {tmp_path}', env, stdin=subprocess.PIPE)
+    assert '"ready": true' in emulator.stdout.readline()
+    node = sourced(install, f'exec {ROOT}/scripts/ros2_run tentacle_inserter inserter_node '
+                   f'--ros-args -p port:={tmp_path}/inserter', env)
+    try:
+        lines = []
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline:
+            lines.append(node.stdout.readline())
+            if 'connected: axis stopped' in lines[-1]:  # said by the axis process
+                break
+        assert 'connected: axis stopped' in lines[-1], ''.join(lines)
+        node.send_signal(signal.SIGINT)
+        out, _ = node.communicate(timeout=20)
+        assert node.returncode == 0, out
+        assert 'inserter_node: axis stopped' in out
     finally:
         for proc in (node, emulator):
             if proc.poll() is None:

@@ -264,6 +264,38 @@ def test_a_firmware_reset_mid_move_is_caught_and_read_back(axis):
     assert emu.state()['travel_m'] == pytest.approx(stood)    # and nothing moved it since
 
 
+def test_a_firmware_that_restarts_after_m112_is_waited_for_and_read_back(tmp_path):
+    link = str(tmp_path / 'stage')
+    emu = GcodeStage('e', link_path=link, accel_m_s2=ACCEL, reset_after_halt_s=1.0).start()
+    node = start_node(tmp_path, link, steps_per_mm=80.0)  # the firmware boots with 100
+    probe = AxisProbe()
+    try:
+        assert probe.call('home', timeout_s=20.0).success, node.output()
+        probe.target(0.02)
+        assert wait_for(lambda: truth(emu) > 0.002, 5.0)
+        t_stop = time.monotonic()
+        assert probe.call('stop').success
+        assert wait_for(lambda: not emu.state()['busy'], 0.5)      # halted at once
+        stood = emu.state()['travel_m']
+        assert wait_for(lambda: emu.state()['halted'] is False, 3.0)  # it restarted by itself
+        # The driver waited for it, set it up again (M92 after the restart) and read it back.
+        assert wait_for(lambda: [e['command'] for e in emu.log if e['t'] > t_stop + 1.0][-2:]
+                        == ['M92', 'M114'], 3.0), node.output()
+        since = time.monotonic() + 0.1
+        assert wait_for(lambda: probe.position(since) is not None, 2.0)
+        assert probe.position(since) == 0.0 == truth(emu)       # a restart counts from 0 here
+        assert emu.state()['travel_m'] == stood and emu.state()['steps_per_mm'] == 80.0
+        assert probe.call('home').success
+        probe.target(0.001)
+        assert wait_for(lambda: truth(emu) == pytest.approx(0.001, abs=STEP_M), 5.0)
+        assert emu.state()['travel_m'] == pytest.approx(stood + 0.001, abs=STEP_M)
+    finally:
+        probe.close()
+        code = node.stop()
+        emu.stop()
+    assert code == 0, node.output()
+
+
 def test_a_killed_axis_process_is_replaced_and_the_axis_halted(axis):
     probe, emu, node = axis
     probe.target(0.04)

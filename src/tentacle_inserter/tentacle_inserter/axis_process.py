@@ -40,7 +40,8 @@ def make_stage(p):
         return stage.GcodeStage(line, max_length_m=p['max_length'], max_speed_m_s=p['max_speed'],
                                 accel_m_s2=p['acceleration'], steps_per_mm=p['steps_per_mm'],
                                 reply_timeout_s=p['reply_timeout_s'], retries=p['retries'],
-                                time_margin=p['time_margin'], slack_s=p['slack_s'])
+                                time_margin=p['time_margin'], slack_s=p['slack_s'],
+                                restart_timeout_s=p['restart_timeout_s'])
     if p['dialect'] == 'step1mm':
         mapping = step1mm.Mapping(p['step1mm_extend'], p['step1mm_retract'], p['step1mm_stop'])
         return stage.Step1mmStage(line, max_length_m=p['max_length'], mapping=mapping,

@@ -26,6 +26,8 @@ INSERTER_PARAMS = (
     Param('retries', 2, 'attempts after the first before a command counts as failed', 0, 20),
     Param('time_margin', 1.5, 'a move may take its expected time times this', 1.0, 100.0),
     Param('slack_s', 0.5, '... plus this before it counts as stalled, second', 0.0, 60.0),
+    Param('restart_timeout_s', 5.0, 'gcode: wait for a firmware that restarts after M112 '
+          '(M999 refused), second', 0.0, 120.0),
     Param('state_rate', 20.0, 'rate of /<axis>/state, hertz', 0.1, 1000.0),
     Param('step1mm_extend', '2',
           "step1mm: the character that extends 1 mm (earlier lab code: '1')"),

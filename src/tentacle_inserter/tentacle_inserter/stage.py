@@ -18,11 +18,12 @@ has no reply and no readback: its position is counted, and says so (``measured``
 import math
 
 from tentacle_common.attempts import Attempts
-from tentacle_common.errors import DriverError, Refused, ReplyTimeout
+from tentacle_common.errors import DriverError, ExchangeFailed, FrameError, Refused, ReplyTimeout
 from tentacle_inserter import gcode, step1mm
 from tentacle_inserter.trapezoid import move_time_s, position_at
 
 POLL_S = 0.01  # how often a waiting move looks whether it was cancelled (s)
+RESTART_POLL_S = 0.1  # how often a halted firmware is asked whether it is back (s)
 STEP1MM_SETTLE_S = 0.02  # a step1mm move is waited for this beyond its expected time (s)
 
 
@@ -40,6 +41,10 @@ class NotHomed(DriverError):
 
 class MoveStopped(DriverError):
     """A move was cut short by a stop: the axis was halted, and must be homed again."""
+
+
+class StillHalted(DriverError):
+    """After M112 the firmware neither took M999 nor restarted in time: reset the board."""
 
 
 def check_target(target_m, max_length_m):
@@ -65,7 +70,8 @@ class GcodeStage:
     measured = True  # M114 reads the position back
 
     def __init__(self, line, *, max_length_m, max_speed_m_s, accel_m_s2, steps_per_mm,
-                 reply_timeout_s=0.5, retries=2, time_margin=1.5, slack_s=0.5):
+                 reply_timeout_s=0.5, retries=2, time_margin=1.5, slack_s=0.5,
+                 restart_timeout_s=5.0):
         """
         Bind to a line (a SerialLine); ``connect()`` talks to the firmware.
 
@@ -76,12 +82,14 @@ class GcodeStage:
         :param reply_timeout_s: longest wait for a reply to a command (not for motion)
         :param time_margin, slack_s: a move may take its trapezoid's time x time_margin +
             slack_s before it is called stalled
+        :param restart_timeout_s: longest wait for a firmware that restarts after M112
         """
         self.line = line
         self.max_length_m, self.max_speed_m_s = float(max_length_m), float(max_speed_m_s)
         self.accel_m_s2, self.steps_per_mm = float(accel_m_s2), float(steps_per_mm)
         self.reply_timeout_s = float(reply_timeout_s)
         self.time_margin, self.slack_s = float(time_margin), float(slack_s)
+        self.restart_timeout_s = float(restart_timeout_s)
         self.attempts = Attempts(line, retries=retries, max_turnaround_s=reply_timeout_s)
         self.position_m = None  # as last read back (None: unknown)
         self.homed = False
@@ -117,14 +125,16 @@ class GcodeStage:
     # -- life cycle -------------------------------------------------------------------------
     def connect(self):
         """
-        Open the line, halt whatever runs, set absolute mode and the calibration; read back.
+        Open the line, halt what still moves, set absolute mode and the calibration; read back.
 
-        The halt first: a move queued before a line loss, or by a driver process that died,
-        may still be running, and nobody is waiting for it any more.
+        A move queued before a line loss, or by a driver process that died, may still be
+        running, and nobody is waiting for it any more: unless M400 answers at once (no
+        motion), the axis is halted (M112, M999) first.
         """
         self.line.open()
         self.attempts.resync()
-        self._halt()
+        if not self._idle():
+            self._halt()
         self._command(gcode.absolute())
         self._command(gcode.steps_per_mm(self.steps_per_mm))
         self.homed = False
@@ -217,12 +227,48 @@ class GcodeStage:
         self._halt()
         return self.read_position()
 
+    def _idle(self):
+        """Return True if M400 is answered ok within the reply timeout (nothing moves)."""
+        try:
+            self._exchange(gcode.wait_for_motion(), self.reply_timeout_s)
+            return True
+        except (ReplyTimeout, Refused, FrameError):
+            self.attempts.out_of_step = True  # its ok may still come
+            return False
+
     def _halt(self):
-        """Halt (M112) and reset (M999): the axis stands, unhomed."""
+        """
+        Halt (M112) and reset (M999): the axis stands, unhomed.
+
+        A firmware that must restart after M112 (Marlin's kill) refuses M999 or says
+        nothing: it is then asked for its position every RESTART_POLL_S until it answers,
+        up to restart_timeout_s, and absolute mode and the calibration are set again (a
+        restart forgets them).
+
+        :raises StillHalted: it did not come back in time
+        """
         self.line.write(gcode.halt())   # Marlin answers nothing to M112
         self.homed, self._motion = False, None
         self.attempts.out_of_step = True  # drop whatever a halted firmware still says
-        self._command(gcode.reset())
+        try:
+            self._command(gcode.reset())
+            return
+        except ExchangeFailed:
+            pass
+        deadline = self.line.now() + self.restart_timeout_s
+        while True:
+            self.line.discard_input()     # its 'start' and any halted errors
+            try:
+                self._exchange(gcode.report_position(), self.reply_timeout_s)
+                break
+            except (Refused, ReplyTimeout, FrameError):
+                if self.line.now() >= deadline:
+                    raise StillHalted(f'{self.line.path}: halted by M112, M999 refused, and '
+                                      f'not restarted in {self.restart_timeout_s:g} s: reset '
+                                      'the board') from None
+                self.line.wait_input(min(deadline, self.line.now() + RESTART_POLL_S))
+        self._command(gcode.absolute())
+        self._command(gcode.steps_per_mm(self.steps_per_mm))
 
 
 class Step1mmStage:

@@ -13,8 +13,8 @@ from tentacle_sim.scripted_line import Exchange, ScriptedLine, ScriptError
 
 SPEED, ACCEL = 0.005, 0.5
 OK = b'ok\n'
-CONNECT = [Exchange(b'M112\n'),                           # halt whatever still runs
-           Exchange(b'M999\n', OK), Exchange(b'G90\n', OK),
+CONNECT = [Exchange(b'M400\n', OK),                       # nothing moves: no halt
+           Exchange(b'G90\n', OK),
            Exchange(b'M92 E100.00000\n', OK),
            Exchange(b'M114\n', b'X:0.00 Y:0.00 Z:0.00 E:3.2100 Count X:0 Y:0 Z:0\n' + OK)]
 HOME = [Exchange(b'G92 E0.0000\n', OK),
@@ -29,13 +29,51 @@ def gcode_axis(script, **kwargs):
     return stage.GcodeStage(line, **options), line
 
 
-def test_connect_halts_first_then_reads_the_position_back_unhomed():
+def test_connect_reads_the_position_back_unhomed():
     axis, line = gcode_axis(CONNECT)
     assert axis.connect() == pytest.approx(0.00321)
     line.finish()
     assert not axis.homed
     with pytest.raises(stage.NotHomed):
         axis.move_to(0.01)          # nothing more on the wire: the script has ended
+
+
+def test_connect_to_a_firmware_still_moving_halts_it_first():
+    axis, line = gcode_axis([Exchange(b'M400\n'),            # busy: no ok in reply_timeout
+                             Exchange(b'M112\n'), Exchange(b'M999\n', OK)] + CONNECT[1:])
+    assert axis.connect() == pytest.approx(0.00321)
+    line.finish()
+    assert not axis.homed
+
+
+def test_a_firmware_that_must_restart_after_m112_is_waited_for_and_set_up_again():
+    halted = b'Error:Printer halted. kill() called!\n'
+    back = b'X:0.00 Y:0.00 Z:0.00 E:0.0000\n' + OK
+    axis, line = gcode_axis(CONNECT + HOME + [
+        Exchange(b'M112\n')] + [Exchange(b'M999\n', halted)] * 3 + [
+        Exchange(b'M114\n', halted), Exchange(b'M114\n', halted),   # still down
+        Exchange(b'M114\n', back),                                    # restarted: count 0
+        Exchange(b'G90\n', OK), Exchange(b'M92 E100.00000\n', OK),    # settings again
+        Exchange(b'M114\n', back)], restart_timeout_s=2.0)
+    axis.connect()
+    axis.home()
+    t0 = line.now()
+    assert axis.stop() == 0.0
+    line.finish()
+    # One drain of the halted line (its reply timeout), then a poll each RESTART_POLL_S.
+    assert 2 * stage.RESTART_POLL_S <= line.now() - t0 < 0.2 + 2 * stage.RESTART_POLL_S + 0.05
+    assert not axis.homed
+
+
+def test_a_firmware_that_stays_halted_is_reported_in_its_time():
+    halted = b'Error:Printer halted. kill() called!\n'
+    axis, line = gcode_axis(CONNECT + [Exchange(b'M112\n')]
+                            + [Exchange(b'M999\n', halted)] * 3
+                            + [Exchange(b'M114\n', halted)] * 6, restart_timeout_s=0.5)
+    axis.connect()
+    with pytest.raises(stage.StillHalted, match='reset the board'):
+        axis.stop()
+    line.finish()
 
 
 def test_a_move_is_one_absolute_line_waited_for_and_read_back():

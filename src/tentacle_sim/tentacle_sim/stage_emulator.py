@@ -10,9 +10,10 @@ codecs of tentacle_inserter so driver and emulator share the wire:
   when motion has finished (commands sent meanwhile are answered at once: our driver waits
   for each reply, and Marlin would hold them); ``M114`` reports the position; ``M112`` stops
   the axis where it is and answers every later line with Marlin's halted error until
-  ``M999`` (which resumes, count and settings kept) or, with ``reset_after_halt_s``, until
-  the firmware restarts by itself (it then says ``start`` and counts from 0 where the axis
-  stands, as a rebooted board does; the axis itself does not move).
+  ``M999`` (which resumes, count and settings kept) or, with ``reset_after_halt_s`` (a
+  firmware like Marlin's kill(), which M999 does not bring back), until it restarts by
+  itself (it then says ``start`` and counts from 0 where the axis stands, as a rebooted
+  board does, with its settings back to their defaults; the axis itself does not move).
 - Step1mmStage: the reference rig's inserter (tentacle_inserter.step1mm): each character
   moves 1 mm (or stops), nothing is ever answered.
 
@@ -206,7 +207,7 @@ class GcodeStage(PtyDevice):
                 self.halted_at, self._waiting = now, False
                 return meaning, None  # Marlin halts without an answer
             if self.halted_at is not None:
-                if code == 'M999':
+                if code == 'M999' and self.reset_after_halt_s is None:
                     self.halted_at = None  # running again; the count and settings kept
                     return meaning, gcode.OK
                 return meaning, gcode.format_error(gcode.HALTED)

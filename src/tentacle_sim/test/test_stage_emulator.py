@@ -72,11 +72,12 @@ def test_m112_stops_at_once_and_holds_until_reset(stage):
     assert not dev.state()['halted']
 
 
-def test_a_firmware_that_restarts_by_itself_after_a_halt_says_start(stage):
+def test_a_firmware_that_must_restart_after_a_halt_refuses_m999_then_says_start(stage):
     dev, fd = stage(reset_after_halt_s=0.2)
     ask(fd, gcode.move(0.002, 0.01))
     time.sleep(0.3)
     os.write(fd, gcode.halt())
+    assert gcode.parse_reply(ask(fd, gcode.reset())) == ('error', gcode.HALTED)  # no M999
     assert read_line(fd, 1.0) == b'start\n'
     stood = dev.state()['travel_m']
     assert stood > 0.0005 and dev.state()['position_m'] == 0.0  # counts from 0 where it stands

@@ -1,0 +1,188 @@
+"""
+Track the tentacle in frames: tip, heading and centreline, or a loop, or lost (no ROS).
+
+``Tracker(base_px, pixel_map, settings).track(image)`` segments the frame (segmentation.py),
+takes the connected component that reaches the insertion point as the body, orders its
+centreline from the base (centreline.py) and returns a ``Track``: the tip (px and m), its
+heading (rad about z, workspace) and the centreline, base to tip. It searches a region of
+interest around the last body and falls back to the whole frame when the body is not found
+there or leaves it. When the body closes on itself the track is a loop (centre, radius,
+turned angle) and has no tip; when no body is found, or it leaves the frame (its tip out of
+sight), the track says why, and has no tip either.
+"""
+
+from dataclasses import dataclass, field
+import time
+
+import numpy as np
+
+from tentacle_vision.centreline import bands, end_fit, geodesic_px, loops, refine_end
+from tentacle_vision.segmentation import foreground, to_gray
+
+
+@dataclass
+class Settings:
+    """What the tracker is told; pixels unless named otherwise."""
+
+    segmentation: str = 'otsu'        # otsu, adaptive, fixed or colour
+    dark: bool = True                 # the body is darker than the background
+    threshold: int = 128              # for 'fixed'
+    block_px: int = 51                # for 'adaptive'
+    offset: int = 10                  # for 'adaptive'
+    colour_low: tuple = (0, 0, 0)     # for 'colour', bgr
+    colour_high: tuple = (255, 255, 255)
+    blur_px: float = 1.0              # before thresholding
+    max_width_px: float = 40.0        # the body is at most this wide (for 'otsu')
+    base_search_px: float = 30.0      # the body must come this close to the insertion point
+    min_body_px: int = 150            # fewer pixels are not a body
+    band_px: float = 2.0              # centreline spacing along the body
+    fit_length_px: float = 80.0       # the end's direction is fitted over this much body
+    roi_margin_px: int = 80           # the search window around the last body
+    min_loop_area_px: float = 150.0   # a smaller hole is not a loop
+
+
+@dataclass
+class Loop:
+    """The body closed on itself: the loop it makes (workspace, m and rad)."""
+
+    centre_m: np.ndarray
+    radius_m: float                   # of the loop's centreline
+    turned_rad: float                 # the body's turn from the insertion to its end
+    centre_px: np.ndarray
+
+
+@dataclass
+class Track:
+    """One frame's answer; ``found`` with a tip, or ``loop``, or neither and ``reason``."""
+
+    found: bool
+    reason: str
+    tip_px: np.ndarray = None
+    tip_m: np.ndarray = None
+    heading_rad: float = float('nan')
+    centreline_px: np.ndarray = None
+    centreline_m: np.ndarray = None
+    loop: Loop = None
+    window: tuple = (0, 0, 0, 0)      # x, y, width, height searched, px
+    full_frame: bool = True
+    seconds: float = 0.0
+    timings: dict = field(default_factory=dict)
+
+
+class Tracker:
+    """Tip and shape from frames of one camera; keeps the search window between frames."""
+
+    def __init__(self, base_px, pixel_map, settings=None):
+        """Track from the insertion point ``base_px`` (u, v); pixels to metres by pixel_map."""
+        self.base_px = np.asarray(base_px, float).reshape(2)
+        if not np.all(np.isfinite(self.base_px)):
+            raise ValueError(f'base_px {base_px!r} must be two finite numbers')
+        self.map = pixel_map
+        self.settings = settings or Settings()
+        self.window = None  # (x0, y0, x1, y1) around the last body, or None: whole frame
+
+    def track(self, image):
+        """Return the Track of one frame (mono8 or bgr8)."""
+        t0 = time.perf_counter()
+        height, width = image.shape[:2]
+        whole = (0, 0, width, height)
+        result = None
+        if self.window is not None:
+            result = self._track_in(image, self.window)
+        if result is None or not (result.found or result.loop is not None):
+            result = self._track_in(image, whole) or result
+        self.window = self._window_of(result, width, height)
+        result.seconds = time.perf_counter() - t0
+        return result
+
+    # -- one window -------------------------------------------------------------------------
+    def _track_in(self, image, window):
+        """Return a Track in a window, or None if the body leaves a window smaller than all."""
+        x0, y0, x1, y1 = window
+        s = self.settings
+        full = (x0, y0) == (0, 0) and (x1, y1) == image.shape[1::-1]
+        crop = image[y0:y1, x0:x1]
+        mask, _ = foreground(crop, s.segmentation, dark=s.dark, threshold=s.threshold,
+                             block_px=s.block_px, offset=s.offset, colour_low=s.colour_low,
+                             colour_high=s.colour_high, blur_px=s.blur_px,
+                             max_width_px=s.max_width_px)
+        base = self.base_px - (x0, y0)
+        lost = Track(False, '', window=(x0, y0, x1 - x0, y1 - y0), full_frame=full)
+        seed = self._seed(mask, base)
+        if seed is None:
+            lost.reason = (f'no body within {s.base_search_px:g} px of the insertion point '
+                           f'{tuple(np.round(self.base_px, 1))}')
+            return lost
+        rows, cols, dist = geodesic_px(mask, seed)   # the seed's component, and distances
+        h, w = mask.shape
+        edge = (rows == 0) | (cols == 0) | (rows == h - 1) | (cols == w - 1)
+        edge &= (cols - base[0]) ** 2 + (rows - base[1]) ** 2 > (2 * s.base_search_px) ** 2
+        if edge.any():
+            if not full:
+                return None  # it leaves the window: look at the whole frame
+            lost.reason = ('the body leaves the frame (at px '
+                           f'{cols[edge][0] + x0}, {rows[edge][0] + y0}): its tip is not seen')
+            return lost
+        if len(rows) < s.min_body_px:
+            lost.reason = f'no body at the insertion point: only {len(rows)} px there'
+            return lost
+        line = bands(rows, cols, dist, s.band_px)
+        offset = np.array([x0, y0], float)
+        r0, c0 = rows.min(), cols.min()
+        body = np.zeros((rows.max() - r0 + 3, cols.max() - c0 + 3), np.uint8)
+        body[rows - r0 + 1, cols - c0 + 1] = 1
+        holes = loops(body, s.min_loop_area_px)
+        if holes:
+            return self._loop_track(lost, holes[0], line, offset + (c0 - 1, r0 - 1),
+                                    offset, len(rows))
+        end, direction = end_fit(line, s.fit_length_px)
+        tip = refine_end(to_gray(crop), end, direction, line.width_px)
+        tip_px = tip + offset
+        centreline_px = np.vstack([line.points_px + offset, tip_px])
+        return Track(True, 'tracking', tip_px, self.map.to_metres(tip_px)[0],
+                     self.map.heading(direction, tip_px), centreline_px,
+                     self.map.to_metres(centreline_px), window=lost.window, full_frame=full)
+
+    def _seed(self, mask, base):
+        """Return the body pixel (row, col) nearest the base within reach, or None."""
+        r = self.settings.base_search_px
+        h, w = mask.shape
+        c0, c1 = int(max(base[0] - r, 0)), int(min(base[0] + r + 1, w))
+        r0, r1 = int(max(base[1] - r, 0)), int(min(base[1] + r + 1, h))
+        if c0 >= c1 or r0 >= r1:
+            return None
+        rows, cols = np.nonzero(mask[r0:r1, c0:c1])
+        if not len(rows):
+            return None
+        d2 = (cols + c0 - base[0]) ** 2 + (rows + r0 - base[1]) ** 2
+        k = int(np.argmin(d2))
+        return (int(rows[k] + r0), int(cols[k] + c0)) if d2[k] <= r * r else None
+
+    def _loop_track(self, lost, hole, line, hole_offset, offset, area_px):
+        """Return the Track of a body that closed on itself (no tip)."""
+        centre_px = hole[0] + hole_offset
+        # The width near the base, where the body is single; its length from its area.
+        width_px = line.width_near_base_px()
+        radius_px = hole[1] + 0.5 * width_px
+        length_px = area_px / width_px
+        to_centre = np.hypot(*(line.points_px + offset - centre_px).T)
+        entry = line.s_px[np.argmax(to_centre <= radius_px + width_px)]
+        turned = max(length_px - entry, 0.0) / radius_px
+        scale = self.map.metres_per_px_at(centre_px)
+        lost.reason = 'loop: the body closed on itself; no tip'
+        lost.loop = Loop(self.map.to_metres(centre_px)[0], radius_px * scale, float(turned),
+                         centre_px)
+        lost.centreline_px = line.points_px + offset
+        lost.centreline_m = self.map.to_metres(lost.centreline_px)
+        return lost
+
+    def _window_of(self, result, width, height):
+        """Return the next search window: the last body's box plus a margin, or None."""
+        if result.centreline_px is None:
+            return None
+        margin = self.settings.roi_margin_px
+        lo = np.floor(np.minimum(result.centreline_px.min(axis=0), self.base_px)) - margin
+        hi = np.ceil(np.maximum(result.centreline_px.max(axis=0), self.base_px)) + margin
+        x0, y0 = np.maximum(lo, 0).astype(int)
+        x1, y1 = np.minimum(hi, (width, height)).astype(int)
+        return int(x0), int(y0), int(x1), int(y1)

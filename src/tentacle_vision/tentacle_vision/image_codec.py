@@ -38,6 +38,8 @@ def for_tracking(encoding, image, colour=False):
         return cv2.cvtColor(image, cv2.COLOR_RGB2BGR if colour else cv2.COLOR_RGB2GRAY)
     if encoding == 'bgr8':
         return image if colour else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    if image.ndim == 3:  # already converted (bgr8)
+        return image if colour else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
     if colour:
         raise ValueError('colour segmentation needs a colour image, not mono8')
     return image

@@ -40,8 +40,9 @@ def foreground(image, method='otsu', *, dark=True, threshold=128, block_px=51, o
         return cv2.inRange(image, np.asarray(colour_low, np.uint8),
                            np.asarray(colour_high, np.uint8)) > 0, None
     gray = to_gray(image)
-    if blur_px > 0:
-        gray = cv2.GaussianBlur(gray, (0, 0), blur_px)
+    if blur_px > 0:  # a kernel of 1.5 sigma each side: the cheap 3 x 3 for sigma 1
+        size = 2 * int(round(1.5 * blur_px)) + 1
+        gray = cv2.GaussianBlur(gray, (size, size), blur_px)
     kind = cv2.THRESH_BINARY_INV if dark else cv2.THRESH_BINARY
     if method == 'otsu':
         # Uneven lighting would make Otsu split the background: threshold the contrast.
@@ -66,8 +67,9 @@ def contrast(gray, max_width_px=40.0, dark=True, shrink=4):
     ``shrink`` times smaller and scaled back up (the lighting is smooth).
     """
     h, w = gray.shape
+    # Linear, not area, sampling down: 20 times cheaper, and the frame is already smoothed.
     small = cv2.resize(gray, (max(w // shrink, 1), max(h // shrink, 1)),
-                       interpolation=cv2.INTER_AREA)
+                       interpolation=cv2.INTER_LINEAR)
     k = 2 * int(np.ceil(max_width_px / shrink)) + 3
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))
     small = cv2.morphologyEx(small, cv2.MORPH_CLOSE if dark else cv2.MORPH_OPEN, disc)

@@ -16,6 +16,7 @@ import time
 
 import numpy as np
 
+from tentacle_vision import image_codec
 from tentacle_vision.centreline import bands, end_fit, geodesic_px, loops, refine_end
 from tentacle_vision.segmentation import foreground, to_gray
 
@@ -80,10 +81,17 @@ class Tracker:
         self.map = pixel_map
         self.settings = settings or Settings()
         self.window = None  # (x0, y0, x1, y1) around the last body, or None: whole frame
+        self._encoding = 'mono8'
 
-    def track(self, image):
-        """Return the Track of one frame (mono8 or bgr8)."""
+    def track(self, image, encoding='mono8'):
+        """
+        Return the Track of one frame, as decoded by image_codec.from_message.
+
+        Only the searched window is converted to grey (or bgr for colour segmentation):
+        demosaicking a whole bayer frame would cost more than tracking in it.
+        """
         t0 = time.perf_counter()
+        self._encoding = encoding
         height, width = image.shape[:2]
         whole = (0, 0, width, height)
         result = None
@@ -101,7 +109,10 @@ class Tracker:
         x0, y0, x1, y1 = window
         s = self.settings
         full = (x0, y0) == (0, 0) and (x1, y1) == image.shape[1::-1]
-        crop = image[y0:y1, x0:x1]
+        if self._encoding == 'bayer_rggb8':  # keep the mosaic's phase: even corners
+            x0, y0 = x0 & ~1, y0 & ~1
+        crop = image_codec.for_tracking(self._encoding, image[y0:y1, x0:x1],
+                                        colour=s.segmentation == 'colour')
         mask, _ = foreground(crop, s.segmentation, dark=s.dark, threshold=s.threshold,
                              block_px=s.block_px, offset=s.offset, colour_low=s.colour_low,
                              colour_high=s.colour_high, blur_px=s.blur_px,

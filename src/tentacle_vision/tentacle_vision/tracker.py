@@ -50,6 +50,7 @@ class Loop:
     radius_m: float                   # of the loop's centreline
     turned_rad: float                 # the body's turn from the insertion to its end
     centre_px: np.ndarray
+    radius_px: float
 
 
 @dataclass
@@ -182,7 +183,7 @@ class Tracker:
         scale = self.map.metres_per_px_at(centre_px)
         lost.reason = 'loop: the body closed on itself; no tip'
         lost.loop = Loop(self.map.to_metres(centre_px)[0], radius_px * scale, float(turned),
-                         centre_px)
+                         centre_px, float(radius_px))
         lost.centreline_px = line.points_px + offset
         lost.centreline_m = self.map.to_metres(lost.centreline_px)
         return lost

@@ -1,22 +1,169 @@
 """
-Track the tentacle in camera frames (/vision/tip, /vision/shape): not built yet.
+tracker_node: the tentacle's tip and shape from camera frames, at camera rate.
 
-The executable exists so the package installs and the ament index lists it; a later issue
-fills it. Running it says so and exits non-zero rather than pretending to work.
+Subscribes ``image_topic`` (sensor_msgs/Image: mono8, bgr8, rgb8, bayer_rggb8; the latest
+two frames, reliable unless ``image_reliability`` is best_effort, so a slow moment drops
+frames instead of queueing them). For each frame it publishes,
+with the frame's own header stamp and frame ``workspace``:
+
+- /vision/tip (geometry_msgs/PoseStamped): the tip, m; heading as a rotation about z
+- /vision/shape (nav_msgs/Path): the centreline, base to tip, m
+- /vision/loop (sensor_msgs/JointState): when the body has closed on itself, instead of a
+  tip: ``name`` ['centre_x', 'centre_y', 'radius', 'turned'], ``position`` [m, m, m, rad]
+  (a turn past a full circle hides under the body: the turn seen)
+- /vision/debug_image (sensor_msgs/Image, bgr8) at ``debug_rate``, scaled by ``debug_scale``
+- /diagnostics: tracking, loop or lost (and why), processing time, frames and losses.
+
+When no body is found, or its tip is out of the frame, nothing is published for that frame:
+never a stale or made-up tip. The pipeline is tentacle_vision.tracker (no rclpy).
 """
 
-import argparse
+import collections
+import math
 import sys
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import Path
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import Image, JointState
+from tentacle_common.driver_node import declare_parameters, diagnostic_status, run_node
+from tentacle_common.errors import ConfigError
+from tentacle_vision import image_codec
+from tentacle_vision.annotate import annotate
+from tentacle_vision.params import TRACKER_NODE, TRACKER_PARAMS
+from tentacle_vision.pixels import pixel_map
+from tentacle_vision.tracker import Settings, Tracker
+
+FRAME_ID = 'workspace'
+TIMES_KEPT = 200  # processing times behind the diagnostics' median and p95
+
+
+def image_qos(reliability):
+    """
+    Return the frames' QoS: the latest two, reliable (default) or best effort.
+
+    Reliable, because a best-effort 3 MB frame is lost more often than not between two
+    processes (../shared/NOTES.md, images); a best-effort camera driver needs best_effort.
+    """
+    return QoSProfile(depth=2, history=HistoryPolicy.KEEP_LAST,
+                      reliability=ReliabilityPolicy.BEST_EFFORT if reliability == 'best_effort'
+                      else ReliabilityPolicy.RELIABLE)
+
+
+def pose(point_m, heading_rad, header):
+    """Return a PoseStamped at a workspace point (m), turned by heading_rad about z."""
+    msg = PoseStamped(header=header)
+    msg.pose.position.x, msg.pose.position.y = float(point_m[0]), float(point_m[1])
+    msg.pose.orientation.z = math.sin(0.5 * heading_rad)
+    msg.pose.orientation.w = math.cos(0.5 * heading_rad)
+    return msg
+
+
+class TrackerNode(Node):
+    """The ROS side of the tracker."""
+
+    def __init__(self):
+        """Declare the parameters, build the tracker, wire topics."""
+        super().__init__(TRACKER_NODE)
+        p = declare_parameters(self, TRACKER_PARAMS)
+        h = [float(v) for v in p['homography']]
+        settings = Settings(**{k: (tuple(p[k]) if isinstance(p[k], list) else p[k])
+                               for k in Settings.__dataclass_fields__})
+        try:
+            self.tracker = Tracker(p['base_px'], pixel_map(p['metres_per_px'],
+                                                           h if any(h) else (), p['base_px']),
+                                   settings)
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
+        self.debug_period_s = 1.0 / p['debug_rate'] if p['debug_rate'] > 0 else math.inf
+        self.debug_scale = p['debug_scale']
+        self.tip_pub = self.create_publisher(PoseStamped, '/vision/tip', 10)
+        self.shape_pub = self.create_publisher(Path, '/vision/shape', 10)
+        self.loop_pub = self.create_publisher(JointState, '/vision/loop', 10)
+        self.debug_pub = self.create_publisher(Image, '/vision/debug_image', 1)
+        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.create_subscription(Image, p['image_topic'], self.on_image,
+                                 image_qos(p['image_reliability']))
+        self.create_timer(1.0, self.publish_diagnostics)
+        self.image_topic = p['image_topic']
+        self.times = collections.deque(maxlen=TIMES_KEPT)
+        self.frames = self.lost = self.loops = 0
+        self.last = None          # the last Track
+        self.last_problem = ''    # the last frame that could not be read
+        self.next_debug = 0.0
+
+    def on_image(self, msg):
+        """Track one frame and publish what it shows."""
+        t0 = time.perf_counter()
+        try:
+            image = image_codec.from_message(msg.encoding, msg.height, msg.width, msg.step,
+                                             msg.data)
+            track = self.tracker.track(image, msg.encoding)
+        except ValueError as exc:
+            self.last_problem = str(exc)
+            self.get_logger().error(f'frame not tracked: {exc}', throttle_duration_sec=5.0)
+            return
+        header = msg.header
+        header.frame_id = FRAME_ID
+        if track.found:
+            self.tip_pub.publish(pose(track.tip_m, track.heading_rad, header))
+        elif track.loop is not None:
+            loop = track.loop
+            self.loop_pub.publish(JointState(
+                header=header, name=['centre_x', 'centre_y', 'radius', 'turned'],
+                position=[float(loop.centre_m[0]), float(loop.centre_m[1]),
+                          float(loop.radius_m), float(loop.turned_rad)]))
+            self.loops += 1
+        else:
+            self.lost += 1
+        if track.centreline_m is not None:
+            self.shape_pub.publish(Path(header=header, poses=[
+                pose(p, 0.0, header) for p in track.centreline_m]))
+        self.frames += 1
+        self.times.append(time.perf_counter() - t0)
+        self.last, self.last_problem = track, ''
+        now = time.monotonic()
+        if now >= self.next_debug:
+            self.next_debug = now + self.debug_period_s
+            picture = annotate(image_codec.for_tracking(msg.encoding, image), track,
+                               self.debug_scale)
+            height, width, step, data = image_codec.to_message(picture, 'bgr8')
+            self.debug_pub.publish(Image(header=header, height=height, width=width,
+                                         encoding='bgr8', step=step, data=data))
+
+    def publish_diagnostics(self):
+        """Publish one status: tracking, loop or lost, and the processing time."""
+        track = self.last
+        if self.last_problem:
+            level, message = 'error', f'frames not readable: {self.last_problem}'
+        elif track is None:
+            level, message = 'warn', f'no frames yet on {self.image_topic}'
+        elif track.found:
+            level, message = 'ok', 'tracking'
+        elif track.loop is not None:
+            level, message = 'ok', track.reason
+        else:
+            level, message = 'warn', f'lost: {track.reason}'
+        ordered = sorted(self.times)
+        values = {'frames': self.frames, 'lost': self.lost, 'loops': self.loops,
+                  'processing_median_ms': round(1e3 * ordered[len(ordered) // 2], 3)
+                  if ordered else '',
+                  'processing_p95_ms': round(1e3 * ordered[int(0.95 * (len(ordered) - 1))], 3)
+                  if ordered else '',
+                  'full_frame_search': track.full_frame if track else ''}
+        msg = DiagnosticArray(status=[diagnostic_status(f'{TRACKER_NODE}: tip', self.image_topic,
+                                                        level, message, values)])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.diag_pub.publish(msg)
 
 
 def main(args=None):
-    """Parse the command line (``--help`` works) and refuse to run."""
-    parser = argparse.ArgumentParser(
-        prog='tracker_node',
-        description='Track the tentacle in camera frames (/vision/tip, /vision/shape).'
-                    ' Not implemented yet.')
-    parser.parse_known_args(args)
-    sys.exit('tracker_node: not implemented yet (a later issue builds it)')
+    """Run the node until a signal."""
+    run_node(sys.argv[1:] if args is None else list(args), TRACKER_NODE, TRACKER_PARAMS,
+             __doc__, TrackerNode, lambda node: 'stopped')
 
 
 if __name__ == '__main__':

@@ -30,6 +30,7 @@ EXECUTABLES = {  # DESIGN.md, "Packages" ('-': a package without executables)
 MORE_EXECUTABLES = {  # ours beyond DESIGN.md's table
     'tentacle_coils': ['calibrate_coils'],
     'tentacle_sim': ['stage_emulator'],
+    'tentacle_vision': ['calibrate_camera'],
 }
 COLCON = str(pathlib.Path(sys.executable).parent / 'colcon')
 

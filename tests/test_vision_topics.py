@@ -10,6 +10,7 @@ import sys
 import threading
 import time
 
+import cv2
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Path
@@ -160,3 +161,38 @@ def test_a_coiled_body_is_a_loop_not_a_tip(tracker):
     assert values['radius'] == pytest.approx(R, abs=3 * MAP.s)
     assert values['turned'] >= np.radians(330)
     assert not probe.stamped('tip', 4_000_000_000)
+
+
+def test_camera_node_replays_a_recorded_run_into_the_tracker(tmp_path):
+    """camera_node (a folder of frames) -> tracker_node -> tips that follow the truth."""
+    renderer = Renderer(MAP, noise_sigma=3.0)
+    truths = []
+    for k in range(6):   # the body grows 2 mm a frame, then bends
+        line = centreline_of([(0.02 + 0.002 * k, 0.0), (0.004 * k, 20.0)])
+        truths.append(renderer.render(line, 1e-3))
+        cv2.imwrite(str(tmp_path / f'frame_{k:03d}.png'), truths[-1].image)
+    tracker = NodeProcess([sys.executable, '-m', 'tentacle_vision.tracker_node', '--ros-args',
+                           '-p', f'base_px:=[{BASE_PX[0]}, {BASE_PX[1]}]',
+                           '-p', f'metres_per_px:={MAP.s}'], str(tmp_path / 'tracker.log'))
+    probe = CameraProbe()
+    camera = None
+    try:
+        # The probe must hear the tracker before the run starts: tips are not kept for it.
+        assert wait_for(lambda: probe.node.count_publishers('/vision/tip') > 0, 20.0)
+        time.sleep(0.5)
+        camera = NodeProcess([sys.executable, '-m', 'tentacle_vision.camera_node', '--ros-args',
+                              '-p', f'source:={tmp_path}', '-p', 'rate:=5.0',
+                              '-p', 'encoding:=mono8', '-p', 'wait_for_subscriber:=true'],
+                             str(tmp_path / 'camera.log'))
+        assert wait_for(lambda: len(probe.got['tip']) >= 6, 30.0), (
+            len(probe.got['tip']), camera.output(), tracker.output())
+        tips = [np.array([m.pose.position.x, m.pose.position.y]) for m in probe.got['tip']]
+        errors_m = [min(np.hypot(*(tip - t.tip_m)) for t in truths) for tip in tips]
+        assert max(errors_m) <= 1.0 * MAP.s                      # each tip is a true one
+        order = [int(np.argmin([np.hypot(*(tip - t.tip_m)) for t in truths])) for tip in tips]
+        assert order == list(range(6))                           # in the order recorded
+        assert wait_for(lambda: 'source ended after 6 frames' in camera.output(), 5.0)
+    finally:
+        probe.close()
+        codes = [node.stop() for node in (camera, tracker) if node is not None]
+    assert codes == [0, 0], (camera.output(), tracker.output())

@@ -21,6 +21,7 @@ setup(
         'console_scripts': [
             'camera_node = tentacle_vision.camera_node:main',
             'tracker_node = tentacle_vision.tracker_node:main',
+            'calibrate_camera = tentacle_vision.calibrate:main',
         ],
     },
 )

@@ -80,6 +80,11 @@ def geodesic_px(mask, seed_rc):
     return visited // w - 1, visited % w - 1, at.astype(np.float64) / UNIT
 
 
+def warm_up():
+    """Load (or compile, the first time on a machine) the compiled pass before frames come."""
+    geodesic_px(np.ones((3, 3), bool), (1, 1))
+
+
 @dataclass
 class Centreline:
     """Ordered centreline points of a body (px), their distances from the base, its end."""

@@ -51,4 +51,6 @@ CAMERA_PARAMS = (
     Param('encoding', 'bgr8', 'published encoding: bgr8 or mono8', ),
     Param('frame_id', 'camera', 'header frame of the frames and the camera info'),
     Param('loop', False, 'replay a video or folder from the start when it ends'),
+    Param('wait_for_subscriber', False, 'start when /camera/image_raw has a subscriber (a '
+          'replay then loses no frame to discovery)'),
 )

@@ -33,6 +33,7 @@ from tentacle_common.driver_node import declare_parameters, diagnostic_status, r
 from tentacle_common.errors import ConfigError
 from tentacle_vision import image_codec
 from tentacle_vision.annotate import annotate
+from tentacle_vision.centreline import warm_up
 from tentacle_vision.params import TRACKER_NODE, TRACKER_PARAMS
 from tentacle_vision.pixels import pixel_map
 from tentacle_vision.tracker import Settings, Tracker
@@ -78,6 +79,7 @@ class TrackerNode(Node):
                                    settings)
         except ValueError as exc:
             raise ConfigError(str(exc)) from None
+        warm_up()  # the first frame must not wait for the compiled pass to load
         self.debug_period_s = 1.0 / p['debug_rate'] if p['debug_rate'] > 0 else math.inf
         self.debug_scale = p['debug_scale']
         self.tip_pub = self.create_publisher(PoseStamped, '/vision/tip', 10)

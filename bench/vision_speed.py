@@ -7,19 +7,30 @@ phantom: straight, 90 deg and S-shaped bodies. Each is tracked 30 times in a row
 would send it (the search window follows the body), as mono8 and as bayer_rggb8 (the
 demosaicking counted), and once from scratch (the whole frame searched: the first frame, or
 after the body was lost). The target is 8 ms median to keep up with 120 fps; 4 ms is the aim.
+Then across processes: frames published from here to tracker_node, timed from publish() to
+the /vision/tip that carries the frame's stamp, with Fast DDS's default transports and with
+config/fastdds_large_images.xml (a 64 MB shared-memory segment).
 
 Run: .venv/bin/python bench/vision_speed.py
 """
 
+import json
 import os
 import pathlib
 import statistics
+import subprocess
 import sys
+import tempfile
 import time
 
 os.environ.setdefault('OMP_NUM_THREADS', '1')
 ROOT = pathlib.Path(__file__).resolve().parent.parent
-sys.path[:0] = [str(p) for p in sorted((ROOT / 'src').iterdir()) if (p / 'package.xml').exists()]
+SOURCES = [str(p) for p in sorted((ROOT / 'src').iterdir()) if (p / 'package.xml').exists()]
+sys.path[:0] = SOURCES
+os.environ['PYTHONPATH'] = os.pathsep.join(SOURCES + [os.environ.get('PYTHONPATH', '')])
+os.environ.setdefault('ROS_DOMAIN_ID', str(224 + os.getpid() % 2))
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+PROFILE = ROOT / 'config' / 'fastdds_large_images.xml'
 
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
@@ -59,6 +70,55 @@ def track_times(frame, encoding):
     return following, scratch
 
 
+LATENCY_PROBE = """
+import sys, threading, time, json
+import numpy as np, rclpy
+from geometry_msgs.msg import PoseStamped
+from sensor_msgs.msg import Image
+from tentacle_vision.tracker_node import image_qos
+frame = np.load(sys.argv[1])
+rclpy.init()
+node = rclpy.create_node('latency_probe')
+pub = node.create_publisher(Image, '/camera/image_raw', image_qos('reliable'))
+sent, got = {}, {}
+node.create_subscription(PoseStamped, '/vision/tip', lambda m: got.setdefault(
+    m.header.stamp.sec * 10**9 + m.header.stamp.nanosec, time.perf_counter()), 10)
+threading.Thread(target=rclpy.spin, args=(node,), daemon=True).start()
+while pub.get_subscription_count() == 0 or node.count_publishers('/vision/tip') == 0:
+    time.sleep(0.05)
+time.sleep(1.0)
+msg = Image(height=frame.shape[0], width=frame.shape[1], encoding='mono8',
+            step=frame.shape[1], data=frame.tobytes())
+for k in range(1, 121):   # 30 Hz
+    msg.header.stamp.sec = k
+    sent[k * 10**9] = time.perf_counter()
+    pub.publish(msg)
+    time.sleep(1 / 30)
+time.sleep(1.0)
+print(json.dumps([got[s] - t for s, t in sent.items() if s in got]))
+"""
+
+
+def latency(frame, profile):
+    """Return the publish-to-tip latencies (s) of 120 frames at 30 Hz through tracker_node."""
+    env = dict(os.environ)
+    if profile:
+        env['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(PROFILE)
+    with tempfile.TemporaryDirectory() as folder:
+        np.save(f'{folder}/frame.npy', frame)
+        node = subprocess.Popen([sys.executable, '-m', 'tentacle_vision.tracker_node',
+                                 '--ros-args', '-p', f'base_px:=[{BASE_PX[0]}, {BASE_PX[1]}]',
+                                 '-p', f'metres_per_px:={MAP.s}'], env=env,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            out = subprocess.run([sys.executable, '-c', LATENCY_PROBE, f'{folder}/frame.npy'],
+                                 env=env, capture_output=True, text=True, timeout=120)
+        finally:
+            node.send_signal(2)
+            node.wait(20)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
 def main():
     """Render the frames, time the renderer and the tracker, print the table."""
     print(f'{cv2.getNumThreads()} OpenCV thread; 2048 x 1536 frames, 50 um/px, 1 mm body')
@@ -83,6 +143,12 @@ def main():
                   f'{statistics.median(scratch) * 1e3:6.2f} ms    '
                   f'{statistics.median(render_times) * 1e3:6.2f} ms', flush=True)
     print(f'all frames followed: {milliseconds(everything)} (target 8 ms median, aim 4 ms)')
+    frame = renderer.render(centreline_of(SHAPES['90']), 1e-3).image
+    print('publish to /vision/tip across processes, mono8, 30 Hz (median / p95):')
+    for profile in (False, True):
+        times = latency(frame, profile)
+        print(f'  {"config/fastdds_large_images.xml" if profile else "default transports":32s}'
+              f'{milliseconds(times)}, {len(times)} of 120 frames answered', flush=True)
 
 
 if __name__ == '__main__':

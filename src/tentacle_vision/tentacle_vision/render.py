@@ -101,11 +101,18 @@ def _fill(canvas, quads):
     OpenCV's own fills draw a slanted edge about half a pixel outside (the line through it
     is drawn too), which would bias every truth.
     """
-    h, w = canvas.shape
+    # Only the quads' box is sampled finely (the magnets are a small part of the body).
+    lo = np.maximum(np.floor(quads.reshape(-1, 2).min(axis=0)).astype(int) - 1, 0)
+    hi = np.minimum(np.ceil(quads.reshape(-1, 2).max(axis=0)).astype(int) + 2,
+                    canvas.shape[::-1])
+    if np.any(hi <= lo):
+        return
+    part = canvas[lo[1]:hi[1], lo[0]:hi[0]]
+    h, w = part.shape
     fine = np.zeros((h * SUPERSAMPLE, w * SUPERSAMPLE), np.uint8)
     # Coarse pixel k spans [k - 0.5, k + 0.5): its fine pixels' centres are k S ... k S + S - 1.
-    _raster(canvas, fine, (quads + 0.5) * SUPERSAMPLE - 0.5, SUPERSAMPLE)
-    np.minimum(canvas, 1.0, out=canvas)
+    _raster(part, fine, (quads - lo + 0.5) * SUPERSAMPLE - 0.5, SUPERSAMPLE)
+    np.minimum(part, 1.0, out=part)
 
 
 def arc_lengths(points):
@@ -200,15 +207,18 @@ class Renderer:
         corner = np.array([x0, y0], float)
         coverage = np.zeros((y1 - y0, x1 - x0), np.float32)
         _fill(coverage, _quads(line_px - corner, width_px))
-        darker = np.zeros_like(coverage)
+        shade = self.body  # the body's grey, darker along the magnets
         s = arc_lengths(line_m)
         for start, end in magnets_m:
             inside = (s >= start) & (s <= end)
             if inside.sum() >= 2:
+                if np.isscalar(shade):
+                    darker = np.zeros_like(coverage)
                 _fill(darker, _quads(line_px[inside] - corner, width_px))
+                shade = self.body + (self.magnet - self.body) * darker
         image = self.background.copy()
         roi = image[y0:y1, x0:x1].astype(np.float32)
-        roi = roi * (1 - coverage) + coverage * (self.body * (1 - darker) + self.magnet * darker)
+        roi += coverage * (shade - roi)
         if self.blur_px > 0:
             roi = cv2.GaussianBlur(roi, (0, 0), self.blur_px)
         image[y0:y1, x0:x1] = np.clip(roi + 0.5, 0, 255).astype(np.uint8)

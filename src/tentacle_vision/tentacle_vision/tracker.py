@@ -11,7 +11,7 @@ turned angle) and has no tip; when no body is found, or it leaves the frame (its
 sight), the track says why, and has no tip either.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 import time
 
 import numpy as np
@@ -68,7 +68,6 @@ class Track:
     window: tuple = (0, 0, 0, 0)      # x, y, width, height searched, px
     full_frame: bool = True
     seconds: float = 0.0
-    timings: dict = field(default_factory=dict)
 
 
 class Tracker:

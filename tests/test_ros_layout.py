@@ -106,57 +106,51 @@ def test_every_executable_answers_help_through_the_ament_index(workspace):
         assert 'usage' in out.lower(), out
 
 
-def test_coils_node_starts_and_stops_cleanly_from_the_install(workspace, tmp_path):
-    layout, install = workspace
+def run_from_install(install, emulator_command, node_command, started, stopped):
+    """
+    Run an emulator and a node through ros2_run, and stop the node with SIGINT.
+
+    The node is stopped once it says ``started``; it must exit 0 saying ``stopped``. Both
+    are killed if anything hangs.
+    """
     env = {k: os.environ[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')}
-    emulator = sourced(install, f'{ROOT}/scripts/ros2_run tentacle_sim supply_emulator '
-                       f'--baud 115200 --link-dir {tmp_path}', env, stdin=subprocess.PIPE)
-    assert '"ready": true' in emulator.stdout.readline()
-    ports = '[' + ','.join(f'{tmp_path}/coil_{n}' for n in 'xyz') + ']'
-    node = sourced(install, f'exec {ROOT}/scripts/ros2_run tentacle_coils coils_node '
-                   f'--ros-args --params-file {ROOT}/config/coils.yaml -p "ports:={ports}" '
-                   '-p baud:=115200', env)
+    emulator = sourced(install, f'{ROOT}/scripts/ros2_run {emulator_command}', env,
+                       stdin=subprocess.PIPE)
+    node = None
     try:
+        assert '"ready": true' in emulator.stdout.readline()
+        node = sourced(install, f'exec {ROOT}/scripts/ros2_run {node_command}', env)
         lines = []
         deadline = time.monotonic() + 20
         while time.monotonic() < deadline:
             lines.append(node.stdout.readline())
-            if 'auto_enable' in lines[-1]:
+            if started in lines[-1]:
                 break
-        assert 'auto_enable' in lines[-1], ''.join(lines)
+        assert started in lines[-1], ''.join(lines)
         node.send_signal(signal.SIGINT)
         out, _ = node.communicate(timeout=20)
         assert node.returncode == 0, out
-        assert 'outputs zero and off' in out
+        assert stopped in out
     finally:
         for proc in (node, emulator):
-            if proc.poll() is None:
+            if proc is not None and proc.poll() is None:
                 os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+            if proc is not None:
+                proc.wait()
+
+
+def test_coils_node_starts_and_stops_cleanly_from_the_install(workspace, tmp_path):
+    layout, install = workspace
+    ports = '[' + ','.join(f'{tmp_path}/coil_{n}' for n in 'xyz') + ']'
+    run_from_install(install, f'tentacle_sim supply_emulator --baud 115200 --link-dir {tmp_path}',
+                     f'tentacle_coils coils_node --ros-args --params-file '
+                     f'{ROOT}/config/coils.yaml -p "ports:={ports}" -p baud:=115200',
+                     'auto_enable', 'outputs zero and off')
 
 
 def test_inserter_node_runs_its_axis_process_from_the_install(workspace, tmp_path):
     layout, install = workspace
-    env = {k: os.environ[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')}
-    emulator = sourced(install, f'{ROOT}/scripts/ros2_run tentacle_sim stage_emulator '
-                       f'--link-dir {tmp_path}', env, stdin=subprocess.PIPE)
-    assert '"ready": true' in emulator.stdout.readline()
-    node = sourced(install, f'exec {ROOT}/scripts/ros2_run tentacle_inserter inserter_node '
-                   f'--ros-args -p port:={tmp_path}/inserter', env)
-    try:
-        lines = []
-        deadline = time.monotonic() + 20
-        while time.monotonic() < deadline:
-            lines.append(node.stdout.readline())
-            if 'connected: axis stopped' in lines[-1]:  # said by the axis process
-                break
-        assert 'connected: axis stopped' in lines[-1], ''.join(lines)
-        node.send_signal(signal.SIGINT)
-        out, _ = node.communicate(timeout=20)
-        assert node.returncode == 0, out
-        assert 'inserter_node: axis stopped' in out
-    finally:
-        for proc in (node, emulator):
-            if proc.poll() is None:
-                os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+    # 'connected: axis stopped' is said by the axis process: it found its packages.
+    run_from_install(install, f'tentacle_sim stage_emulator --link-dir {tmp_path}',
+                     f'tentacle_inserter inserter_node --ros-args -p port:={tmp_path}/inserter',
+                     'connected: axis stopped', 'inserter_node: axis stopped')

@@ -36,6 +36,7 @@ from tentacle_vision.annotate import annotate
 from tentacle_vision.centreline import warm_up
 from tentacle_vision.params import TRACKER_NODE, TRACKER_PARAMS
 from tentacle_vision.pixels import pixel_map
+from tentacle_vision.segmentation import METHODS
 from tentacle_vision.tracker import Settings, Tracker
 
 FRAME_ID = 'workspace'
@@ -70,6 +71,11 @@ class TrackerNode(Node):
         """Declare the parameters, build the tracker, wire topics."""
         super().__init__(TRACKER_NODE)
         p = declare_parameters(self, TRACKER_PARAMS)
+        if p['segmentation'] not in METHODS:
+            raise ConfigError(f"segmentation {p['segmentation']!r} is not one of {METHODS}")
+        if p['image_reliability'] not in ('reliable', 'best_effort'):
+            raise ConfigError(f"image_reliability {p['image_reliability']!r} is not reliable "
+                              'or best_effort')
         h = [float(v) for v in p['homography']]
         settings = Settings(**{k: (tuple(p[k]) if isinstance(p[k], list) else p[k])
                                for k in Settings.__dataclass_fields__})

@@ -254,7 +254,8 @@ def test_a_firmware_reset_mid_move_is_caught_and_read_back(axis):
     emu.inject('reset')          # the board restarts: it forgets the move and counts from 0
     stood = emu.state()['travel_m']
     assert wait_for(lambda: sent(emu, 'M114', t0), 1.5)   # at its 'start', not at a timeout
-    assert 'restarted during the move' in node.output()
+    # The read-back reaches the stage before the failure's log line reaches the node's log.
+    assert wait_for(lambda: 'restarted during the move' in node.output(), 3.0)
     t_back = time.monotonic()
     assert wait_for(lambda: (probe.status(t_back) or (None, ''))[1].startswith(
         'not homed'), 5.0), (probe.status(), node.output())

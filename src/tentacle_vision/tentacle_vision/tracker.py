@@ -5,20 +5,26 @@ Track the tentacle in frames: tip, heading and centreline, or a loop, or lost (n
 takes the connected component that reaches the insertion point as the body, orders its
 centreline from the base (centreline.py) and returns a ``Track``: the tip (px and m), its
 heading (rad about z, workspace) and the centreline, base to tip. It searches a region of
-interest around the last body and falls back to the whole frame when the body is not found
-there or leaves it. When the body closes on itself the track is a loop (centre, radius,
-turned angle) and has no tip; when no body is found, or it leaves the frame (its tip out of
-sight), the track says why, and has no tip either.
+interest around the last body; when the body is not found there or leaves it (or on the
+first frame) it looks for it in a frame four times smaller, tracks it in the window found
+there, and searches the whole frame at full size only if that fails. When the body closes
+on itself the track is a loop (centre, radius, turned angle) and has no tip; when no body
+is found, or it leaves the frame (its tip out of sight), the track says why, and has no tip
+either.
 """
 
 from dataclasses import dataclass
 import time
 
+import cv2
 import numpy as np
 
 from tentacle_vision import image_codec
 from tentacle_vision.centreline import bands, end_fit, geodesic_px, loops, refine_end
 from tentacle_vision.segmentation import foreground, to_gray
+
+
+COARSE = 4  # a lost body is looked for in a frame this many times smaller first
 
 
 @dataclass
@@ -98,7 +104,13 @@ class Tracker:
         if self.window is not None:
             result = self._track_in(image, self.window)
         if result is None or not (result.found or result.loop is not None):
-            result = self._track_in(image, whole) or result
+            # Lost, or the first frame: find the body at a quarter size first, then track it in
+            # its window at full size; the whole frame at full size is the last resort.
+            coarse = self._coarse_window(image)
+            if coarse is not None:
+                result = self._track_in(image, coarse) or result
+            if result is None or not (result.found or result.loop is not None):
+                result = self._track_in(image, whole) or result
         self.window = self._window_of(result, width, height)
         result.seconds = time.perf_counter() - t0
         return result
@@ -154,9 +166,41 @@ class Tracker:
                      self.map.heading(direction, tip_px), centreline_px,
                      self.map.to_metres(centreline_px), window=lost.window, full_frame=full)
 
-    def _seed(self, mask, base):
+    def _coarse_window(self, image):
+        """Return the window of the body found in a frame COARSE times smaller, or None."""
+        s = self.settings
+        if s.segmentation == 'colour':
+            return None
+        if self._encoding == 'bayer_rggb8':
+            small = image[0::2, 1::2]  # the green sites: a half-size grey frame, for free
+            step = 2
+        else:
+            small = image_codec.for_tracking(self._encoding, image)
+            step = 1
+        shrink = COARSE // step
+        h, w = small.shape[:2]
+        small = cv2.resize(small, (w // shrink, h // shrink), interpolation=cv2.INTER_AREA)
+        mask, _ = foreground(small, s.segmentation, dark=s.dark, threshold=s.threshold,
+                             block_px=max(s.block_px // COARSE, 3), offset=s.offset,
+                             blur_px=0.0, max_width_px=s.max_width_px / COARSE)
+        seed = self._seed(mask, self.base_px / COARSE, s.base_search_px / COARSE + 1)
+        if seed is None:
+            return None
+        rows, cols, _ = geodesic_px(mask, seed)
+        if len(rows) * COARSE ** 2 < s.min_body_px:
+            return None
+        margin = s.roi_margin_px
+        height, width = image.shape[:2]
+        lo = np.minimum([cols.min() * COARSE, rows.min() * COARSE], self.base_px) - margin
+        hi = np.maximum([(cols.max() + 1) * COARSE, (rows.max() + 1) * COARSE],
+                        self.base_px) + margin
+        x0, y0 = np.maximum(lo, 0).astype(int)
+        x1, y1 = np.minimum(hi, (width, height)).astype(int)
+        return int(x0), int(y0), int(x1), int(y1)
+
+    def _seed(self, mask, base, reach_px=None):
         """Return the body pixel (row, col) nearest the base within reach, or None."""
-        r = self.settings.base_search_px
+        r = self.settings.base_search_px if reach_px is None else reach_px
         h, w = mask.shape
         c0, c1 = int(max(base[0] - r, 0)), int(min(base[0] + r + 1, w))
         r0, r1 = int(max(base[1] - r, 0)), int(min(base[1] + r + 1, h))

@@ -95,6 +95,6 @@ class RigProbe:
     def close(self):
         """Stop the executor and shut the context down."""
         self.executor.shutdown()
+        self._thread.join(timeout=2.0)  # the spin ends before the node it spins goes
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
-        self._thread.join(timeout=2.0)

@@ -59,7 +59,8 @@ class AxisProbe:
                         for axis in axes for name in ('stop', 'home')}
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
-        threading.Thread(target=self.executor.spin, daemon=True).start()
+        self._thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self._thread.start()
 
     def _keep(self, log, msg):
         with self.lock:
@@ -94,6 +95,7 @@ class AxisProbe:
 
     def close(self):
         self.executor.shutdown()
+        self._thread.join(timeout=2.0)  # the spin ends before the node it spins goes
         self.node.destroy_node()
         rclpy.shutdown(context=self.context)
 

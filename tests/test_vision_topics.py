@@ -51,7 +51,8 @@ class CameraProbe:
             self.node.create_subscription(kind, topic, lambda m, k=key: self._keep(k, m), 10)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
-        threading.Thread(target=self.executor.spin, daemon=True).start()
+        self._thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self._thread.start()
 
     def _keep(self, key, msg):
         with self.lock:
@@ -79,6 +80,7 @@ class CameraProbe:
 
     def close(self):
         self.executor.shutdown()
+        self._thread.join(timeout=2.0)  # the spin ends before the node it spins goes
         self.node.destroy_node()
         rclpy.shutdown(context=self.context)
 

@@ -9,6 +9,7 @@ import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rig_support import Spinner
 from std_msgs.msg import Bool
 from std_srvs.srv import SetBool
 
@@ -38,8 +39,7 @@ class RigProbe:
         self.enable_client = self.node.create_client(SetBool, '/coils/enable')
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
-        self._thread = threading.Thread(target=self.executor.spin, daemon=True)
-        self._thread.start()
+        self.spinner = Spinner(self.executor)
 
     def _keep(self, store, msg):
         with self.lock:
@@ -94,7 +94,6 @@ class RigProbe:
 
     def close(self):
         """Stop the executor and shut the context down."""
-        self.executor.shutdown()
-        self._thread.join(timeout=2.0)  # the spin ends before the node it spins goes
+        self.spinner.stop()
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)

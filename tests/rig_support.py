@@ -1,5 +1,7 @@
 """
-What the cross-process tests share: a private ROS domain, the repository root, waiting.
+What the cross-process tests share: a private ROS domain, the root, waiting, spinning.
+
+The spin thread (Spinner) ends before its executor is shut down.
 
 Every run claims a private ROS_DOMAIN_ID (a lock file per domain, so parallel runs on one
 machine never share one) with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, before rclpy is
@@ -9,6 +11,7 @@ imported. Import it before rclpy (tests/conftest.py does).
 import fcntl
 import os
 import pathlib
+import threading
 import time
 
 
@@ -41,3 +44,29 @@ def wait_for(predicate, timeout_s=5.0, period_s=0.01):
             return True
         time.sleep(period_s)
     return False
+
+
+class Spinner:
+    """
+    Spin an rclpy executor on a thread of its own until ``stop()``.
+
+    The thread ends before the executor is shut down: ``Executor.shutdown`` destroys a guard
+    condition that a spin still running may trigger (InvalidHandle in the spin thread).
+    """
+
+    def __init__(self, executor, period_s=0.05):
+        """Start spinning ``executor``, waking every ``period_s`` to look for stop()."""
+        self.executor, self.period_s = executor, period_s
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self):
+        while not self._stop.is_set():
+            self.executor.spin_once(timeout_sec=self.period_s)
+
+    def stop(self):
+        """End the spin thread, then shut the executor down."""
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+        self.executor.shutdown()

@@ -21,7 +21,7 @@ import rclpy  # tests/conftest.py claimed the private ROS domain before this
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rig_support import wait_for
+from rig_support import Spinner, wait_for
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
 from std_srvs.srv import Trigger
@@ -59,8 +59,7 @@ class AxisProbe:
                         for axis in axes for name in ('stop', 'home')}
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
-        self._thread = threading.Thread(target=self.executor.spin, daemon=True)
-        self._thread.start()
+        self.spinner = Spinner(self.executor)
 
     def _keep(self, log, msg):
         with self.lock:
@@ -94,8 +93,7 @@ class AxisProbe:
         return future.result()
 
     def close(self):
-        self.executor.shutdown()
-        self._thread.join(timeout=2.0)  # the spin ends before the node it spins goes
+        self.spinner.stop()
         self.node.destroy_node()
         rclpy.shutdown(context=self.context)
 

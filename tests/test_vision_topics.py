@@ -19,7 +19,7 @@ import pytest
 import rclpy  # tests/conftest.py claimed the private ROS domain before this
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
-from rig_support import wait_for
+from rig_support import Spinner, wait_for
 from sensor_msgs.msg import Image, JointState
 from tentacle_sim.sim_rig import NodeProcess
 from tentacle_vision import image_codec
@@ -51,8 +51,7 @@ class CameraProbe:
             self.node.create_subscription(kind, topic, lambda m, k=key: self._keep(k, m), 10)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
-        self._thread = threading.Thread(target=self.executor.spin, daemon=True)
-        self._thread.start()
+        self.spinner = Spinner(self.executor)
 
     def _keep(self, key, msg):
         with self.lock:
@@ -79,8 +78,7 @@ class CameraProbe:
         return None
 
     def close(self):
-        self.executor.shutdown()
-        self._thread.join(timeout=2.0)  # the spin ends before the node it spins goes
+        self.spinner.stop()
         self.node.destroy_node()
         rclpy.shutdown(context=self.context)
 

@@ -76,6 +76,15 @@ class Track:
     seconds: float = 0.0
 
 
+def status_of(track):
+    """Return (level 'ok' | 'warn', message) of a Track for diagnostics."""
+    if track.found:
+        return 'ok', 'tracking'
+    if track.loop is not None:
+        return 'ok', track.reason
+    return 'warn', f'lost: {track.reason}'
+
+
 class Tracker:
     """Tip and shape from frames of one camera; keeps the search window between frames."""
 
@@ -87,7 +96,6 @@ class Tracker:
         self.map = pixel_map
         self.settings = settings or Settings()
         self.window = None  # (x0, y0, x1, y1) around the last body, or None: whole frame
-        self._encoding = 'mono8'
 
     def track(self, image, encoding='mono8'):
         """
@@ -97,33 +105,32 @@ class Tracker:
         demosaicking a whole bayer frame would cost more than tracking in it.
         """
         t0 = time.perf_counter()
-        self._encoding = encoding
         height, width = image.shape[:2]
         whole = (0, 0, width, height)
         result = None
         if self.window is not None:
-            result = self._track_in(image, self.window)
+            result = self._track_in(image, encoding, self.window)
         if result is None or not (result.found or result.loop is not None):
             # Lost, or the first frame: find the body at a quarter size first, then track it in
             # its window at full size; the whole frame at full size is the last resort.
-            coarse = self._coarse_window(image)
+            coarse = self._coarse_window(image, encoding)
             if coarse is not None:
-                result = self._track_in(image, coarse) or result
+                result = self._track_in(image, encoding, coarse) or result
             if result is None or not (result.found or result.loop is not None):
-                result = self._track_in(image, whole) or result
+                result = self._track_in(image, encoding, whole) or result
         self.window = self._window_of(result, width, height)
         result.seconds = time.perf_counter() - t0
         return result
 
     # -- one window -------------------------------------------------------------------------
-    def _track_in(self, image, window):
+    def _track_in(self, image, encoding, window):
         """Return a Track in a window, or None if the body leaves a window smaller than all."""
         x0, y0, x1, y1 = window
         s = self.settings
         full = (x0, y0) == (0, 0) and (x1, y1) == image.shape[1::-1]
-        if self._encoding == 'bayer_rggb8':  # keep the mosaic's phase: even corners
+        if encoding == 'bayer_rggb8':  # keep the mosaic's phase: even corners
             x0, y0 = x0 & ~1, y0 & ~1
-        crop = image_codec.for_tracking(self._encoding, image[y0:y1, x0:x1],
+        crop = image_codec.for_tracking(encoding, image[y0:y1, x0:x1],
                                         colour=s.segmentation == 'colour')
         mask, _ = foreground(crop, s.segmentation, dark=s.dark, threshold=s.threshold,
                              block_px=s.block_px, offset=s.offset, colour_low=s.colour_low,
@@ -166,16 +173,16 @@ class Tracker:
                      self.map.heading(direction, tip_px), centreline_px,
                      self.map.to_metres(centreline_px), window=lost.window, full_frame=full)
 
-    def _coarse_window(self, image):
+    def _coarse_window(self, image, encoding):
         """Return the window of the body found in a frame COARSE times smaller, or None."""
         s = self.settings
         if s.segmentation == 'colour':
             return None
-        if self._encoding == 'bayer_rggb8':
+        if encoding == 'bayer_rggb8':
             small = image[0::2, 1::2]  # the green sites: a half-size grey frame, for free
             step = 2
         else:
-            small = image_codec.for_tracking(self._encoding, image)
+            small = image_codec.for_tracking(encoding, image)
             step = 1
         shrink = COARSE // step
         h, w = small.shape[:2]

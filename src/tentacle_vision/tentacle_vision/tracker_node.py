@@ -37,7 +37,7 @@ from tentacle_vision.centreline import warm_up
 from tentacle_vision.params import TRACKER_NODE, TRACKER_PARAMS
 from tentacle_vision.pixels import pixel_map
 from tentacle_vision.segmentation import METHODS
-from tentacle_vision.tracker import Settings, Tracker
+from tentacle_vision.tracker import Settings, status_of, Tracker
 
 FRAME_ID = 'workspace'
 TIMES_KEPT = 200  # processing times behind the diagnostics' median and p95
@@ -149,12 +149,8 @@ class TrackerNode(Node):
             level, message = 'error', f'frames not readable: {self.last_problem}'
         elif track is None:
             level, message = 'warn', f'no frames yet on {self.image_topic}'
-        elif track.found:
-            level, message = 'ok', 'tracking'
-        elif track.loop is not None:
-            level, message = 'ok', track.reason
         else:
-            level, message = 'warn', f'lost: {track.reason}'
+            level, message = status_of(track)
         ordered = sorted(self.times)
         values = {'frames': self.frames, 'lost': self.lost, 'loops': self.loops,
                   'processing_median_ms': round(1e3 * ordered[len(ordered) // 2], 3)

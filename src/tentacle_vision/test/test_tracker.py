@@ -11,7 +11,7 @@ import pytest
 from tentacle_vision import image_codec
 from tentacle_vision.pixels import HomographyMap, ScaleMap
 from tentacle_vision.render import centreline_of, Renderer, to_bayer_rggb, to_bgr
-from tentacle_vision.tracker import Settings, Tracker
+from tentacle_vision.tracker import Settings, status_of, Tracker
 
 BASE_PX = (120.0, 1000.0)
 MAP = ScaleMap(5e-5, BASE_PX)
@@ -92,6 +92,7 @@ def test_the_tip_is_in_metres_and_the_shape_runs_base_to_tip():
     assert np.hypot(*(track.tip_m - truth.tip_m)) <= 1.0 * MAP.s
     assert np.hypot(*(track.centreline_m[0] - truth.centreline_m[0])) <= 2e-4
     assert np.allclose(track.centreline_m[-1], track.tip_m)
+    assert status_of(track) == ('ok', 'tracking')
     # Every centreline point lies on the true body: within half its width of the truth.
     d = np.hypot(*(track.centreline_m[:, None, :] - truth.centreline_m[None]).transpose(2, 0, 1))
     assert d.min(axis=1).max() <= 0.5 * WIDTH_M
@@ -107,7 +108,7 @@ def test_a_coiled_body_is_reported_as_a_loop_not_a_tip():
     assert track.loop.radius_m == pytest.approx(0.015, abs=3 * MAP.s)
     # A turn past a full circle hides under the body: at least the circle is seen.
     assert np.radians(330) <= track.loop.turned_rad <= np.radians(420)
-    assert 'loop' in track.reason
+    assert 'loop' in track.reason and status_of(track) == ('ok', track.reason)
 
 
 def test_no_body_is_lost_with_a_reason_and_no_tip():
@@ -116,6 +117,7 @@ def test_no_body_is_lost_with_a_reason_and_no_tip():
     track = Tracker(BASE_PX, MAP).track(empty)
     assert not track.found and track.tip_px is None and track.loop is None
     assert 'no body' in track.reason
+    assert status_of(track) == ('warn', f'lost: {track.reason}')
     far = renderer.render(centreline_of([(0.02, 0.0)], start_m=(0.03, 0.02)), WIDTH_M)
     track = Tracker(BASE_PX, MAP).track(far.image)   # a body, but not at the insertion point
     assert not track.found and 'insertion point' in track.reason

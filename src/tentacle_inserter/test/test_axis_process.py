@@ -13,22 +13,13 @@ DEFAULTS = {p.name: p.default for p in INSERTER_PARAMS}
 STEP_M = 1e-5
 
 
-def wait_for(condition, timeout_s=5.0):
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.01)
-    return False
-
-
 def params(link, **overrides):
     return {**DEFAULTS, 'port': link, 'max_length': 0.05, 'max_speed': 0.01,
             'acceleration': 0.5, 'reply_timeout_s': 0.2, **overrides}
 
 
 @pytest.fixture
-def client(tmp_path):
+def client(tmp_path, wait_for):
     """Return (AxisClient, emulator, refusals), homed."""
     link = str(tmp_path / 'stage')
     emu = GcodeStage('e', link_path=link, accel_m_s2=0.5).start()
@@ -47,7 +38,7 @@ def commands(emu, since=0):
     return [e['command'] for e in emu.log[since:]]
 
 
-def test_a_target_moves_the_axis_and_the_snapshot_follows(client):
+def test_a_target_moves_the_axis_and_the_snapshot_follows(client, wait_for):
     axis, emu, _ = client
     axis.set_target(0.005)
     # While the firmware is busy with the move, the snapshot is its profile, and says so.
@@ -68,7 +59,7 @@ def test_bad_targets_are_refused_before_the_process(client):
     assert 'G1' not in commands(emu) and axis.snapshot()['refusals'] == 6
 
 
-def test_a_vanished_node_leaves_the_axis_stopped(client):
+def test_a_vanished_node_leaves_the_axis_stopped(client, wait_for):
     axis, emu, _ = client
     axis.set_target(0.04)
     assert wait_for(lambda: emu.state()['moving'])
@@ -79,7 +70,7 @@ def test_a_vanished_node_leaves_the_axis_stopped(client):
     assert emu.state()['travel_m'] < 0.03
 
 
-def test_a_killed_axis_process_is_replaced_and_the_axis_halted(client):
+def test_a_killed_axis_process_is_replaced_and_the_axis_halted(client, wait_for):
     axis, emu, refused = client
     axis.set_target(0.04)
     assert wait_for(lambda: emu.state()['moving'])
@@ -101,7 +92,7 @@ def test_a_killed_axis_process_is_replaced_and_the_axis_halted(client):
                     and not emu.state()['busy'])
 
 
-def test_estop_is_carried_over_to_the_replacement(client):
+def test_estop_is_carried_over_to_the_replacement(client, wait_for):
     axis, emu, _ = client
     axis.set_estop(True)
     axis.popen.kill()
@@ -117,7 +108,7 @@ def test_a_bad_configuration_is_reported(tmp_path):
         AxisClient(params(str(tmp_path / 'none'), dialect='canopen'))
 
 
-def test_step1mm_axis_follows_its_profile_and_stops_when_the_node_goes(tmp_path):
+def test_step1mm_axis_follows_its_profile_and_stops_when_the_node_goes(tmp_path, wait_for):
     link = str(tmp_path / 'stage')
     emu = Step1mmStage('e', link_path=link, speed_m_s=0.01).start()
     axis = AxisClient(params(link, dialect='step1mm', baud=9600))

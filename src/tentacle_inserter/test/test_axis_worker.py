@@ -11,17 +11,8 @@ from tentacle_sim.stage_emulator import GcodeStage
 SPEED, ACCEL = 0.01, 0.5
 
 
-def wait_for(condition, timeout_s=5.0):
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.01)
-    return False
-
-
 @pytest.fixture
-def worker(tmp_path):
+def worker(tmp_path, wait_for):
     link = str(tmp_path / 'stage')
     emu = GcodeStage('e', link_path=link, accel_m_s2=ACCEL).start()
     axis = stage.GcodeStage(SerialLine(link, 115200), max_length_m=0.05, max_speed_m_s=SPEED,
@@ -38,7 +29,7 @@ def targets_sent(emu):
     return [round(e['E'], 3) for e in emu.log if e.get('command') == 'G1']
 
 
-def test_the_latest_target_wins_and_none_is_replayed(worker):
+def test_the_latest_target_wins_and_none_is_replayed(worker, wait_for):
     w, emu = worker
     w.set_target(0.010)
     assert wait_for(lambda: emu.state()['moving'])
@@ -50,7 +41,7 @@ def test_the_latest_target_wins_and_none_is_replayed(worker):
     assert w.snapshot()['position_m'] == pytest.approx(0.030, abs=1e-5)
 
 
-def test_stop_cuts_a_move_short_at_once(worker):
+def test_stop_cuts_a_move_short_at_once(worker, wait_for):
     w, emu = worker
     w.set_target(0.030)
     assert wait_for(lambda: emu.state()['moving'])
@@ -63,7 +54,7 @@ def test_stop_cuts_a_move_short_at_once(worker):
     assert emu.state()['travel_m'] < 0.03
 
 
-def test_a_home_asked_for_right_after_a_stop_is_done(worker):
+def test_a_home_asked_for_right_after_a_stop_is_done(worker, wait_for):
     w, emu = worker
     w.set_target(0.030)
     assert wait_for(lambda: emu.state()['moving'])
@@ -76,7 +67,7 @@ def test_a_home_asked_for_right_after_a_stop_is_done(worker):
     assert commands[commands.index('G1'):].count('M112') == 1  # one stop, not two
 
 
-def test_the_estop_halts_and_holds_until_released(worker):
+def test_the_estop_halts_and_holds_until_released(worker, wait_for):
     w, emu = worker
     w.set_target(0.030)
     assert wait_for(lambda: emu.state()['moving'])
@@ -93,7 +84,7 @@ def test_the_estop_halts_and_holds_until_released(worker):
     assert wait_for(lambda: w.moves == 1)
 
 
-def test_a_lost_line_reconnects_unhomed_and_replays_nothing(worker):
+def test_a_lost_line_reconnects_unhomed_and_replays_nothing(worker, wait_for):
     w, emu = worker
     emu.inject('disconnect', duration_s=0.5)
     assert wait_for(lambda: not emu.state()['connected'], 1.0)
@@ -105,7 +96,7 @@ def test_a_lost_line_reconnects_unhomed_and_replays_nothing(worker):
     assert targets_sent(emu) == []
 
 
-def test_state_during_a_move_follows_the_profile_and_says_so(worker):
+def test_state_during_a_move_follows_the_profile_and_says_so(worker, wait_for):
     w, emu = worker
     w.set_target(0.020)
     assert wait_for(lambda: emu.state()['moving'])
@@ -121,7 +112,7 @@ def test_state_during_a_move_follows_the_profile_and_says_so(worker):
     assert not w.snapshot()['estimated']
 
 
-def test_disable_stops_switches_the_motor_off_and_refuses_targets(worker):
+def test_disable_stops_switches_the_motor_off_and_refuses_targets(worker, wait_for):
     w, emu = worker
     w.set_target(0.030)
     assert wait_for(lambda: emu.state()['moving'])
@@ -136,7 +127,7 @@ def test_disable_stops_switches_the_motor_off_and_refuses_targets(worker):
     assert wait_for(lambda: w.moves == 1 and emu.state()['motor_on'], 5.0)
 
 
-def test_the_status_says_what_holds_the_axis(worker):
+def test_the_status_says_what_holds_the_axis(worker, wait_for):
     w, emu = worker
     assert w.status() == ('ok', 'ready')
     w.set_estop(True)

@@ -8,6 +8,8 @@ import pytest
 from tentacle_coils.coil_bank import build_bank
 from tentacle_coils.errors import CommandRejected
 
+LATE_STAMP_S = 5e-3  # how late the emulator may stamp an arrival on a loaded machine (s)
+
 
 @pytest.fixture
 def rig(emulate, wait_for):
@@ -57,8 +59,13 @@ def test_slew_rate_is_never_exceeded(rig, wait_for):
     for emu in emus[:2]:
         entries = [(t_command, 0.0)] + set_entries(emu, since=t_command)
         times, values = np.array(entries).T
-        # Arrival times jitter by about a millisecond around send times.
-        assert np.all(np.abs(np.diff(values)) <= slew * (np.diff(times) + 2e-3))
+        # The emulator stamps a set when it reads it, and on a loaded machine one read can
+        # come some ms late, which shortens the gap to the next: so the rate is checked over
+        # every window between two arrivals, allowing one late stamp.
+        later = np.triu(np.ones((len(times),) * 2, dtype=bool), k=1)
+        change = np.abs(values[None, :] - values[:, None])[later]
+        window = (times[None, :] - times[:, None])[later]
+        assert np.all(change <= slew * (window + LATE_STAMP_S))
         assert times[-1] - t_command >= 5.0 / slew - 2e-3
         assert len(entries) > 5  # ramped in steps, not jumped
 

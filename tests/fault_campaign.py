@@ -49,6 +49,7 @@ STREAM_HZ = 50.0
 # the exact check, set by set on a virtual clock, is src/tentacle_coils/test/test_protocol.py.
 JITTER_S = 2e-3
 SLEW_WINDOW_S = 0.1
+LOG_FORWARD_S = 0.05  # how late the node may stamp a line the bank process logged (s)
 
 
 @dataclass
@@ -262,7 +263,12 @@ def persistent(kind, axis='y', **options):
         t_clear = timed_log(rig, 'fault cleared', t0, 8.0)
         out.check(t_clear is not None, 'the fault never cleared')
         out.recover_s = timed(rig.following, t0, 8.0)
-        wire_report(out, rig, t0, refused=(t_safe, t0 + (t_clear or 0.0)))
+        # Commands are refused until the bank clears the fault, which it logs first; but the
+        # node stamps that line when it reads it from the bank process, a few ms (more under
+        # load) after the first sets may already have landed. So the refused window ends
+        # LOG_FORWARD_S before the stamp, and never before the device is back.
+        t_refused = max(t0 + (t_clear or 0.0) - LOG_FORWARD_S, t0 + options.get('duration_s', 0))
+        wire_report(out, rig, t0, refused=(t_safe, t_refused))
         return out
     return run
 

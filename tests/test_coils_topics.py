@@ -201,6 +201,8 @@ def test_serial_loss_shows_in_diagnostics_reconnects_and_drives_zero(coil_rig, p
     assert after_reconnect and after_reconnect[-1] == 0.0, after_reconnect
     assert all(0.0 <= b <= a for a, b in zip([held] + after_reconnect, after_reconnect)), (
         after_reconnect)
+    # Commands are refused until the bank has read every supply back at zero and says so.
+    assert wait_for(lambda: 'fault cleared' in node.output())
     assert drive(emulators, probe, [1e-3, 1e-3, 1e-3])
 
 

@@ -233,7 +233,10 @@ def transient(kind, **options):
             after = [e for e in log if e['t'] > faulted[-1]['t']]
             return (faulted, after) if after else None
 
-        assert wait_for(lambda: log_after_faults() is not None)
+        if not wait_for(lambda: log_after_faults() is not None):
+            raise RuntimeError(f'{name}: {count} faulted requests and one after them did not '
+                               f'reach y within 5 s; y received since the fault: '
+                               f'{rig.emulators.log("y", t0)[-8:]}\n{rig.node.output()[-3000:]}')
         faulted, after = log_after_faults()
         t_first = faulted[0]['t']
         out.detect_s = next(e['t'] for e in rig.emulators.log('y', t0) if e['t'] > t_first) \

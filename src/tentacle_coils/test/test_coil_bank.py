@@ -8,7 +8,7 @@ import pytest
 from tentacle_coils.coil_bank import build_bank
 from tentacle_coils.errors import CommandRejected
 
-LATE_STAMP_S = 5e-3  # how late the emulator may stamp an arrival on a loaded machine (s)
+BUNCHING_S = 0.02  # how far late stamps may shorten a window between two sets (s)
 
 
 @pytest.fixture
@@ -59,14 +59,18 @@ def test_slew_rate_is_never_exceeded(rig, wait_for):
     for emu in emus[:2]:
         entries = [(t_command, 0.0)] + set_entries(emu, since=t_command)
         times, values = np.array(entries).T
-        # The emulator stamps a set when it reads it, and on a loaded machine one read can
-        # come some ms late, which shortens the gap to the next: so the rate is checked over
-        # every window between two arrivals, allowing one late stamp.
+        # The emulators stamp a set when their thread reads it, and they share this process's
+        # GIL with the bank: under load a read comes late, by multiples of the 5 ms switch
+        # interval, and bunches the sets behind it. A late stamp only makes a set look later,
+        # so no set may arrive before the slew limit allows it from the command: exact, to
+        # half the supply's 10 mA count.
+        assert np.all(np.abs(values) <= slew * (times - t_command) + 0.005 + 1e-9)
+        # Between two sets, bunching shortens the window by up to BUNCHING_S: no jump, though
+        # (the exact set-by-set check is test_protocol.py's, on a virtual clock).
         later = np.triu(np.ones((len(times),) * 2, dtype=bool), k=1)
         change = np.abs(values[None, :] - values[:, None])[later]
         window = (times[None, :] - times[:, None])[later]
-        assert np.all(change <= slew * (window + LATE_STAMP_S))
-        assert times[-1] - t_command >= 5.0 / slew - 2e-3
+        assert np.all(change <= slew * (window + BUNCHING_S))
         assert len(entries) > 5  # ramped in steps, not jumped
 
 

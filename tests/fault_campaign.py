@@ -207,13 +207,14 @@ def wire_report(outcome, rig, t0, refused=None):
         for n in 'xyz':
             before = [v for t, v in sets(rig, 0.0)[n] if t < t_from]
             previous = before[-1] if before else 0.0
-            for _, v in sets(rig, t_from, t_to)[n]:
+            for t, v in sets(rig, t_from, t_to)[n]:
                 count += 1
                 if abs(v) > abs(previous) + 1e-9 or v * previous < 0.0:
-                    away.append((n, previous, v))
+                    away.append((n, previous, v, f'{t - t0:+.3f} s'))
                 previous = v
         outcome.wire.append(f'{count} sets while refused, {len(away)} away from zero')
-        outcome.check(not away, f'sets away from zero while refused: {away[:3]}')
+        outcome.check(not away, f'sets away from zero while refused ({t_from - t0:+.3f} to '
+                                f'{t_to - t0:+.3f} s): {away[:3]}')
 
 
 # -- scenarios --------------------------------------------------------------------------------

@@ -235,9 +235,13 @@ def transient(kind, **options):
             return (faulted, after) if after else None
 
         if not wait_for(lambda: log_after_faults() is not None):
+            pid = bank_pid(rig.probe, t0)
+            if pid is not None:  # where each of the bank's threads waits, on the node's stderr
+                os.kill(pid, signal.SIGUSR1)
+                time.sleep(0.5)
             raise RuntimeError(f'{name}: {count} faulted requests and one after them did not '
                                f'reach y within 5 s; y received since the fault: '
-                               f'{rig.emulators.log("y", t0)[-8:]}\n{rig.node.output()[-3000:]}')
+                               f'{rig.emulators.log("y", t0)[-8:]}\n{rig.node.output()[-12000:]}')
         faulted, after = log_after_faults()
         t_first = faulted[0]['t']
         out.detect_s = next(e['t'] for e in rig.emulators.log('y', t0) if e['t'] > t_first) \

@@ -20,6 +20,7 @@ The child ignores SIGINT (a Ctrl-C reaches the whole process group: the node dec
 treats SIGTERM as a shutdown; signals during the shutdown change nothing.
 """
 
+import faulthandler
 import importlib.util
 import json
 import logging
@@ -121,6 +122,9 @@ def child_main(build, logger_name, state_period_s=0.02):
     terminate = threading.Event()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, lambda *_: terminate.set())
+    # `kill -USR1 <pid>` prints every thread's stack to the node's stderr: where a driver
+    # that stopped talking is waiting, without stopping it.
+    faulthandler.register(signal.SIGUSR1, all_threads=True)
     # Worker threads wake every few milliseconds; don't let them wait 5 ms for each other.
     sys.setswitchinterval(2e-4)
     sys.exit(serve(build, logger_name, terminate=terminate, state_period_s=state_period_s))

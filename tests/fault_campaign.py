@@ -204,10 +204,11 @@ def wire_report(outcome, rig, t0, refused=None):
         # While commands are refused every set is a step towards zero, none away from it.
         t_from, t_to = refused
         away, count = [], 0
+        received = sets(rig, 0.0)  # one read of each log, not two per axis
         for n in 'xyz':
-            before = [v for t, v in sets(rig, 0.0)[n] if t < t_from]
+            before = [v for t, v in received[n] if t < t_from]
             previous = before[-1] if before else 0.0
-            for t, v in sets(rig, t_from, t_to)[n]:
+            for t, v in [(t, v) for t, v in received[n] if t_from <= t <= t_to]:
                 count += 1
                 if abs(v) > abs(previous) + 1e-9 or v * previous < 0.0:
                     away.append((n, previous, v, f'{t - t0:+.3f} s'))

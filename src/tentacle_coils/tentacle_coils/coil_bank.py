@@ -15,6 +15,12 @@ Safety rules, in one place:
 - One safe stop (``_begin_stop``): ramp to zero at the slew limit, then outputs off. Estop
   and disable use it; ``shutdown()`` uses it and waits for the supplies to confirm before
   it stops the workers. The watchdog ramps to zero and leaves outputs on.
+- A set is decided under its channel's lock right before it is written, and every zeroing
+  request (fault, estop, stop, watchdog) makes sets planned before it stale: a worker that
+  was busy on the line when the request came, or is retrying an unanswered set, never sends
+  a value from before it (a stale retry reads back what the device holds and ramps from there).
+- Nothing is logged while the bank's lock is held: a log line ends in the node's pipe, and a
+  stalled reader must never hold up a stop.
 """
 
 import logging
@@ -24,7 +30,8 @@ import time
 
 import numpy as np
 
-from tentacle_coils.errors import CommandRejected, ConfigError, LinkLost, SupplyFault
+from tentacle_coils.errors import (CommandRejected, ConfigError, LinkLost, Superseded,
+                                   SupplyFault)
 from tentacle_coils.supply import make_supply
 from tentacle_common.serial_line import SerialLine
 
@@ -72,6 +79,7 @@ class Channel:
         self.faults = 0
         self._unreachable_logged = False
         self._force_off = False
+        self._generation = 0  # bumped by every zeroing request: sets planned before are stale
         # Line-clock times (supply.line.now()): the slew reference is when the previous set
         # left the line, or when the target left rest, whichever is later.
         self._t_ref = -math.inf
@@ -102,6 +110,17 @@ class Channel:
                 self.output_wanted = bool(output)
                 self._force_off = force_off
             self._cond.notify()
+
+    def zero(self):
+        """Drive the target to zero; a set planned or retried from before this is dropped."""
+        with self._cond:
+            self._generation += 1
+            self.request(target_a=0.0)
+
+    def ready_to_clear(self):
+        """Return True when connected and a read-back confirmed zero: one look, one lock."""
+        with self._cond:
+            return self.connected and self._zero_confirmed()
 
     def settled_zero(self):
         """Return True when a read-back confirmed a zero setpoint (or it is unreachable)."""
@@ -252,7 +271,7 @@ class Channel:
                 if wait <= 0:
                     break
                 self._cond.wait(wait)
-            target, wanted, switch = self.target_a, self.output_wanted, self._output_due()
+            wanted, switch = self.output_wanted, self._output_due()
         if self._stop.is_set():
             return
         if switch:
@@ -260,8 +279,7 @@ class Channel:
             with self._cond:
                 self.output_on = wanted
                 self.confirmed = False
-        if target != self.sent_a:
-            self._step(target)
+        self._step()  # planned now, not before the switch: the target may have changed since
         now = line.now()
         with self._cond:
             busy = self.target_a != self.sent_a
@@ -275,26 +293,49 @@ class Channel:
         if verify:
             self._verify()
 
-    def _step(self, target):
-        """Send one slew-limited step towards target (A)."""
+    def _step(self):
+        """Send one slew-limited step towards the target, decided under the lock (A)."""
         line = self.supply.line
-        now = line.now()
-        # The step's own bytes leave no earlier than now plus their wire time, and the
-        # previous set left at _t_ref: that interval bounds the change at the device.
-        interval = max(now - self._t_ref, 0.0) + line.wire_time_s(self.supply.set_bytes)
-        max_step = self.slew_rate_a_per_s * min(interval, STEP_DT_CAP_S)
-        delta = target - self.sent_a
-        setpoint = target if abs(delta) <= max_step else self.sent_a + math.copysign(
-            max_step, delta)
-        if setpoint * self.sent_a < 0.0:
-            setpoint = 0.0  # stop at zero on the way through: polarity changes at rest only
-        self.supply.set_current(setpoint)
+        with self._cond:
+            if self.target_a == self.sent_a:
+                return
+            now = line.now()
+            # The step's own bytes leave no earlier than now plus their wire time, and the
+            # previous set left at _t_ref: that interval bounds the change at the device.
+            interval = max(now - self._t_ref, 0.0) + line.wire_time_s(self.supply.set_bytes)
+            max_step = self.slew_rate_a_per_s * min(interval, STEP_DT_CAP_S)
+            delta = self.target_a - self.sent_a
+            setpoint = self.target_a if abs(delta) <= max_step else self.sent_a + math.copysign(
+                max_step, delta)
+            if setpoint * self.sent_a < 0.0:
+                setpoint = 0.0  # stop at zero on the way through: polarity changes at rest only
+            generation = self._generation
+
+        def still_wanted():  # asked right before each write of this set, retries included
+            with self._cond:
+                return self._generation == generation
+
+        try:
+            self.supply.set_current(setpoint, still_wanted)
+        except Superseded as exc:
+            if exc.ambiguous:  # an unanswered attempt may have landed: plan from the device
+                self._go_on_from_device()
+            return
         self._t_ref = line.tx_free_at
         self._t_last_set = now
         with self._cond:
             self.sent_a = setpoint
             self.confirmed = False
             self.updates += 1
+
+    def _go_on_from_device(self):
+        """Read back what the device holds and take it as the slew's starting point."""
+        held_a, output_on = self.supply.read_held()
+        with self._cond:
+            self.sent_a, self.output_on = held_a, output_on
+            self.held = (held_a, output_on)
+            self.confirmed = False
+            self._t_ref = self.supply.line.now()
 
     def _verify(self):
         """Read back what the device holds; where it differs, go on from what it holds."""
@@ -438,10 +479,10 @@ class CoilBank:
 
         :return: (success, message)
         """
+        if not on:
+            self._safe_stop('disabled')
+            return True, 'ramping to zero, then outputs off'
         with self._lock:
-            if not on:
-                self._begin_stop('disabled')
-                return True, 'ramping to zero, then outputs off'
             if self._estop:
                 return False, 'estop active'
             if self._fault:
@@ -470,8 +511,9 @@ class CoilBank:
             if active:
                 self._was_enabled = self._enabled
                 self._begin_stop('estop')
-                return
-        if self._was_enabled:
+        if active:
+            log.info('coils: safe stop (estop)')
+        elif self._was_enabled:
             self.enable(True)
 
     def _ramp_time_s(self):
@@ -483,13 +525,18 @@ class CoilBank:
         Zero every target now; the supervisor switches outputs off once all read back zero.
 
         Off is safer than on at any current: if some supply cannot confirm zero within the
-        ramp time plus STOP_GRACE_S, every output is switched off all the same.
+        ramp time plus STOP_GRACE_S, every output is switched off all the same. Call with the
+        lock held; log after releasing it.
         """
         self._enabled = False
         self._stopping = reason
         self._stop_deadline = time.monotonic() + self._ramp_time_s() + STOP_GRACE_S
         for channel in self.channels:
-            channel.request(target_a=0.0)
+            channel.zero()
+
+    def _safe_stop(self, reason):
+        with self._lock:
+            self._begin_stop(reason)
         log.info('coils: safe stop (%s)', reason)
 
     def _on_fault(self, channel, reason):
@@ -497,32 +544,40 @@ class CoilBank:
             first = not self._fault
             self._fault = f'{channel.name}: {reason}'
             for ch in self.channels:
-                ch.request(target_a=0.0)
+                ch.zero()
         if first:
             log.error('coils: supply %s fault, all axes to zero: %s', channel.name, reason)
 
     def _supervise(self):
         while not self._halt.wait(self.supervise_period_s):
-            with self._lock:
-                now = time.monotonic()
-                if (self._enabled and not self._watchdog_tripped
-                        and now - self._last_command > self.watchdog_s
-                        and any(ch.target_a != 0.0 for ch in self.channels)):
-                    self._watchdog_tripped = True
-                    for channel in self.channels:
-                        channel.request(target_a=0.0)
-                    log.warning('coils: watchdog, no command for %.3g s: ramping to zero',
-                                self.watchdog_s)
-                late = now > self._stop_deadline
-                if self._stopping and (late or all(ch.settled_zero() for ch in self.channels)):
-                    for channel in self.channels:
-                        channel.request(output=False, force_off=late)
-                    self._stopping = ''
-                if (self._fault and self.connected()
-                        and all(ch.settled_zero() for ch in self.channels)):
-                    log.info('coils: fault cleared (%s); every supply read back zero',
-                             self._fault)
-                    self._fault = ''
+            self.supervise_once()
+
+    def supervise_once(self):
+        """Run the watchdog, finish a safe stop, clear a fault that has gone (one pass)."""
+        tripped, cleared = False, ''
+        with self._lock:
+            now = time.monotonic()
+            if (self._enabled and not self._watchdog_tripped
+                    and now - self._last_command > self.watchdog_s
+                    and any(ch.target_a != 0.0 for ch in self.channels)):
+                self._watchdog_tripped = True
+                for channel in self.channels:
+                    channel.zero()
+                tripped = True
+            late = now > self._stop_deadline
+            if self._stopping and (late or all(ch.settled_zero() for ch in self.channels)):
+                for channel in self.channels:
+                    channel.request(output=False, force_off=late)
+                self._stopping = ''
+            # One look per channel, under its lock: connected and zero confirmed together (a
+            # supply that drops between two looks must not let the fault clear).
+            if self._fault and all(ch.ready_to_clear() for ch in self.channels):
+                cleared, self._fault = self._fault, ''
+        if tripped:
+            log.warning('coils: watchdog, no command for %.3g s: ramping to zero',
+                        self.watchdog_s)
+        if cleared:
+            log.info('coils: fault cleared (%s); every supply read back zero', cleared)
 
     def shutdown(self, reason='shutdown', timeout_s=None):
         """
@@ -536,8 +591,7 @@ class CoilBank:
             slew limit plus one second; switching off and confirming get one second more
         :return: True when every supply read back zero current and output off
         """
-        with self._lock:
-            self._begin_stop(reason)
+        self._safe_stop(reason)
         if timeout_s is None:
             timeout_s = self._ramp_time_s() + STOP_GRACE_S
         deadline = time.monotonic() + timeout_s

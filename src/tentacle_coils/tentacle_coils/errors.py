@@ -6,7 +6,8 @@ them) and are re-exported here; CoilsError and the common ones share DriverError
 """
 
 from tentacle_common.errors import (  # noqa: F401 (re-exported)
-    ConfigError, DriverError, ExchangeFailed, FrameError, LinkLost, Refused, ReplyTimeout)
+    ConfigError, DriverError, ExchangeFailed, FrameError, LinkLost, Refused, ReplyTimeout,
+    Superseded)
 
 
 class CoilsError(DriverError):

@@ -9,7 +9,7 @@ the other way round.
 """
 
 from tentacle_coils import dxkdp, scpi
-from tentacle_coils.errors import ConfigError, FrameError, NakError, SupplyFault
+from tentacle_coils.errors import ConfigError, FrameError, NakError, Superseded, SupplyFault
 from tentacle_common.attempts import Attempts
 
 
@@ -62,8 +62,15 @@ class Supply:
         """Switch the output on or off."""
         raise NotImplementedError
 
-    def set_current(self, current_a):
-        """Set the current setpoint (A, coil frame)."""
+    def set_current(self, current_a, still_wanted=None):
+        """
+        Set the current setpoint (A, coil frame).
+
+        :param still_wanted: asked right before every write of the set (first send and
+            retries alike); False drops it
+        :raises Superseded: still_wanted() said no; ``ambiguous`` if the device may have
+            taken an earlier, unanswered attempt
+        """
         raise NotImplementedError
 
     def read_current(self):
@@ -102,7 +109,7 @@ class DxkdpSupply(Supply):
         self._positive = None  # device polarity in command mode; None: unknown
         self._magnitude_a = 0.0  # current magnitude last set in command mode (A)
 
-    def _exchange(self, frame, verify=None):
+    def _exchange(self, frame, verify=None, still_wanted=None):
         """Send one request; return None for an ACKed set, the reply Frame for a read."""
         request_bytes, reply_bytes = dxkdp.wire_bytes(frame[2])
         wait_s = self.line.wire_time_s(request_bytes + reply_bytes) + self.reply_timeout_s
@@ -125,7 +132,7 @@ class DxkdpSupply(Supply):
                                  f'to a request for address {self.address} code {code:02x}')
             return reply
 
-        return self.attempts.run(code.name, attempt, verify)
+        return self.attempts.run(code.name, attempt, verify, still_wanted)
 
     def _read_state(self):
         return dxkdp.parse_reading(self._exchange(dxkdp.read_state(self.address)), self.signed)
@@ -162,12 +169,12 @@ class DxkdpSupply(Supply):
         self._exchange(dxkdp.set_output(self.address, on),
                        lambda: self._state_differs(output_on=on))
 
-    def set_current(self, current_a):
-        """Set the current setpoint (A, coil frame)."""
+    def set_current(self, current_a, still_wanted=None):
+        """Set the current setpoint (A, coil frame); see Supply.set_current."""
         device_a = self.sign * current_a
         if self.signed:
             self._exchange(dxkdp.set_current(self.address, device_a, signed=True),
-                           lambda: self._state_differs(current_a=device_a))
+                           lambda: self._state_differs(current_a=device_a), still_wanted)
             return
         positive = device_a >= 0
         if positive != self._positive and (self._positive is not None
@@ -176,10 +183,11 @@ class DxkdpSupply(Supply):
                 self._exchange(dxkdp.set_current(self.address, 0.0),
                                lambda: self._state_differs(current_a=0.0))
                 self._magnitude_a = 0.0
-            self._exchange(dxkdp.set_polarity(self.address, positive, positive))
+            self._exchange(dxkdp.set_polarity(self.address, positive, positive),
+                           still_wanted=still_wanted)
             self._positive = positive
         self._exchange(dxkdp.set_current(self.address, abs(device_a)),
-                       lambda: self._state_differs(current_a=abs(device_a)))
+                       lambda: self._state_differs(current_a=abs(device_a)), still_wanted)
         self._magnitude_a = abs(device_a)
 
     def _coil_frame(self, device_a):
@@ -231,8 +239,10 @@ class ScpiSupply(Supply):
         if self.read_output() != on:
             raise SupplyFault(f'{self.line.path}: output did not switch {"on" if on else "off"}')
 
-    def set_current(self, current_a):
-        """Set the current setpoint (A, coil frame); SCPI sends no reply."""
+    def set_current(self, current_a, still_wanted=None):
+        """Set the current setpoint (A, coil frame); SCPI sends no reply. See Supply."""
+        if still_wanted is not None and not still_wanted():
+            raise Superseded(f'{self.line.path}: CURR {current_a:.4f} no longer wanted')
         self.counters['commands'] += 1
         self.line.write(scpi.set_current(self.sign * current_a))
 

@@ -7,9 +7,14 @@ quiet for the device's worst turnaround (a late reply must never answer a later 
 and a request that succeeds after an ambiguous attempt is confirmed by a read-back: its
 reply could still have been a stale one. A refusal (Refused) is a clean answer: the line is
 in step, and the request is seen as refused.
+
+A set whose value can go stale while it is retried (a zeroing request landed meanwhile)
+carries ``still_wanted``: asked right before every attempt, so a retry never re-sends a value
+nobody wants any more (Superseded says so, and whether the device may have taken it).
 """
 
-from tentacle_common.errors import ExchangeFailed, FrameError, Refused, ReplyTimeout
+from tentacle_common.errors import (ExchangeFailed, FrameError, Refused, ReplyTimeout,
+                                    Superseded)
 
 
 class Attempts:
@@ -37,7 +42,7 @@ class Attempts:
         self.line.discard_input()
         self.out_of_step = False
 
-    def run(self, what, attempt, verify=None):
+    def run(self, what, attempt, verify=None, still_wanted=None):
         """
         Return attempt() once it succeeds, within 1 + retries attempts.
 
@@ -46,7 +51,10 @@ class Attempts:
             FrameError or Refused
         :param verify: after an ambiguous attempt, confirms a success by a read-back;
             returns '' or what is wrong
+        :param still_wanted: asked right before each attempt (after any drain); False drops
+            the request
         :raises ExchangeFailed: (the ``fault`` class) when every attempt failed
+        :raises Superseded: still_wanted() said no before an attempt
         """
         last = None
         ambiguous = False
@@ -59,6 +67,9 @@ class Attempts:
                     self.counters['stale_bytes'] += self.line.discard_input(
                         quiet_s=self.max_turnaround_s)
                     self.out_of_step = False
+                if still_wanted is not None and not still_wanted():
+                    raise Superseded(f'{self.line.path}: {what} no longer wanted '
+                                     f'(before attempt {n + 1})', ambiguous=ambiguous)
                 result = attempt()
                 problem = verify() if ambiguous and verify is not None else ''
                 if not problem:

@@ -18,8 +18,15 @@ and reads from its stdout ``{"ev": "ready"}``, ``state`` snapshots every ``state
 ``stopped`` with whether the device was left safe (``safe``). End of input is a shutdown.
 The child ignores SIGINT (a Ctrl-C reaches the whole process group: the node decides) and
 treats SIGTERM as a shutdown; signals during the shutdown change nothing.
+
+Neither side lets the other hold it up or end it: the child's events go through a queue and
+a writer thread (a node that stops reading never blocks the driver; stale states are dropped,
+and info lines only when the queue is full), and a malformed line on either pipe is refused
+and logged, never the end of its reader. The spare is watched too: one that dies is replaced
+at once, and a child that dies with no spare ready is replaced by a fresh process.
 """
 
+import collections
 import faulthandler
 import importlib.util
 import json
@@ -33,25 +40,93 @@ import time
 
 from tentacle_common.errors import ConfigError, DriverError
 
+FLUSH_TIMEOUT_S = 5.0  # how long a child's last events may wait for a reader at exit (s)
+
 
 # -- the child's side ------------------------------------------------------------------------
 class Emitter:
-    """Write events to stdout, one JSON line each, from any thread."""
+    """
+    Send events to stdout, one JSON line each, from any thread, without ever blocking.
+
+    A writer thread does the writing. Only the latest ``state`` is kept (a newer one makes
+    an unwritten one stale); other events queue in order. When QUEUE_MAX events wait (the
+    node stopped reading), the oldest info or debug log line is dropped, and the count is
+    said once the pipe moves again; warnings, errors, replies and ``stopped`` never are.
+    """
+
+    QUEUE_MAX = 1000
+    DROPPABLE_LEVELS = ('debug', 'info')
 
     def __init__(self, stream):
-        """Write to ``stream`` (the child's stdout)."""
+        """Write to ``stream`` (the child's stdout); starts the writer thread."""
         self.stream = stream
-        self.lock = threading.Lock()
+        self._cond = threading.Condition()
+        self._state = None
+        self._queue = collections.deque()  # (droppable, line)
+        self._writing = False
+        self._broken = False  # the reader has gone: nothing more is written
+        self.dropped = 0
+        threading.Thread(target=self._write_forever, name='child-emitter', daemon=True).start()
 
     def __call__(self, **event):
-        """Write one event; a vanished reader is ignored (the shutdown path still runs)."""
+        """Queue one event; returns at once."""
         line = json.dumps(event) + '\n'
-        with self.lock:
+        with self._cond:
+            if self._broken:
+                return
+            if event.get('ev') == 'state':
+                self._state = line
+            else:
+                if len(self._queue) >= self.QUEUE_MAX:
+                    self._drop_oldest_droppable()
+                droppable = event.get('ev') == 'log' and event.get('level') in (
+                    self.DROPPABLE_LEVELS)
+                self._queue.append((droppable, line))
+            self._cond.notify()
+
+    def _drop_oldest_droppable(self):
+        for i, (droppable, _) in enumerate(self._queue):
+            if droppable:
+                del self._queue[i]
+                self.dropped += 1
+                return
+
+    def flush(self, timeout_s):
+        """Wait until everything queued is written (or the reader is gone); False at timeout."""
+        with self._cond:
+            return self._cond.wait_for(lambda: self._broken or not (
+                self._queue or self._state or self._writing), timeout_s)
+
+    def _next_lines(self):
+        with self._cond:
+            self._writing = False
+            self._cond.notify_all()
+            self._cond.wait_for(lambda: self._queue or self._state)
+            lines = [line for _, line in self._queue]
+            if self.dropped:
+                lines.insert(0, json.dumps({'ev': 'log', 'level': 'warning', 'message': (
+                    f'{self.dropped} info log lines dropped: the node did not read them')})
+                    + '\n')
+                self.dropped = 0
+            if self._state:
+                lines.append(self._state)
+            self._queue.clear()
+            self._state = None
+            self._writing = True
+            return lines
+
+    def _write_forever(self):
+        while True:
+            lines = self._next_lines()
             try:
-                self.stream.write(line)
+                self.stream.write(''.join(lines))
                 self.stream.flush()
-            except (OSError, ValueError):
-                pass
+            except (OSError, ValueError):  # the reader has gone: the shutdown path still runs
+                with self._cond:
+                    self._broken = True
+                    self._writing = False
+                    self._cond.notify_all()
+                return
 
 
 class _ForwardLogs(logging.Handler):
@@ -80,6 +155,7 @@ def serve(build, logger_name, *, stdin=sys.stdin, stdout=sys.stdout, terminate=N
     first = json.loads(stdin.readline() or '{}')
     if first.get('op') != 'config':
         emit(ev='stopped', safe=False, error='first line must be {"op": "config", ...}')
+        emit.flush(FLUSH_TIMEOUT_S)
         return 2
     logger = logging.getLogger(logger_name)  # before the driver starts: it logs its connect
     logger.addHandler(_ForwardLogs(emit))
@@ -88,6 +164,7 @@ def serve(build, logger_name, *, stdin=sys.stdin, stdout=sys.stdout, terminate=N
         driver = build(first['config'], emit)
     except (DriverError, TypeError, KeyError) as exc:
         emit(ev='stopped', safe=False, error=f'config: {exc}')
+        emit.flush(FLUSH_TIMEOUT_S)
         return 2
     emit(ev='ready')
     done = threading.Event()
@@ -98,12 +175,25 @@ def serve(build, logger_name, *, stdin=sys.stdin, stdout=sys.stdout, terminate=N
             emit(ev='state', **driver.state())
 
     def read_requests():
+        # One bad line must not end this loop: its end is how the node's death is noticed.
         for line in stdin:
-            request = json.loads(line)
+            try:
+                request = json.loads(line)
+                if not isinstance(request, dict):
+                    raise ValueError(f'a JSON {type(request).__name__}, not an object')
+            except ValueError as exc:
+                emit(ev='log', level='error', message=f'request refused ({exc}): {line[:200]!r}')
+                continue
             if request.get('op') == 'shutdown':
                 reason[0] = request.get('reason', 'shutdown')
                 break
-            reply = driver.handle(request)
+            try:
+                reply = driver.handle(request)
+            except Exception as exc:  # noqa: B902 (whatever the driver raises, keep serving)
+                emit(ev='log', level='error',
+                     message=f'request {request.get("op")!r} failed: {exc!r}')
+                reply = {'ok': False, 'message': f'request failed: {exc}'} if (
+                    'id' in request) else None
             if reply is not None:
                 emit(ev='reply', id=request.get('id'), **reply)
         terminate.set()
@@ -114,6 +204,7 @@ def serve(build, logger_name, *, stdin=sys.stdin, stdout=sys.stdout, terminate=N
     stopped = driver.shutdown(reason[0])
     done.set()
     emit(ev='stopped', **stopped)
+    emit.flush(FLUSH_TIMEOUT_S)
     return 0
 
 
@@ -172,7 +263,8 @@ class ChildClient:
     Subclasses name the child's ``MODULE``, its ``STARTING`` state (until the first
     snapshot), and say what a death means (``death_note``); ``on_event`` gets the events
     this class does not handle and ``on_started`` runs after each child got its config.
-    After RESTARTS_MAX deaths within RESTART_WINDOW_S no more are started.
+    After RESTARTS_MAX deaths within RESTART_WINDOW_S no more are started. A spare that dies
+    is replaced at once (it holds no device), unless spares die that often too.
     """
 
     MODULE = ''
@@ -197,9 +289,12 @@ class ChildClient:
         self._replies = {}
         self._next_id = 0
         self._closing = False
+        self._lifecycle = threading.RLock()  # one start or replacement at a time
         self.deaths = []     # (time.monotonic(), exit code) of each child that died
+        self.spare_deaths = []  # the same for spares, which held no device
         self.death_note = ''  # what the status says after a death, until cleared
-        self._spare = spawn(self.MODULE)
+        self._spare = None
+        self._spawn_spare()
         self._start_child()
         with self._cond:
             self._cond.wait_for(lambda: self._ready or self._stopped is not None,
@@ -235,20 +330,48 @@ class ChildClient:
         return self._ready and self._stopped is None
 
     def _start_child(self):
-        """Hand the config to the spare, make it the child, start the next spare."""
-        with self._cond:
-            self.popen, self._spare = self._spare, None
-            self._state = dict(self.STARTING)
-            self._ready = False
-            self._stopped = None
-        threading.Thread(target=self._read, args=(self.popen,), name='child-reader',
+        """Hand the config to the spare (a fresh process if none is alive), start the next."""
+        with self._lifecycle:
+            child, self._spare = self._spare, None
+            if child is None or child.poll() is not None:
+                child = spawn(self.MODULE)  # no spare ready: a fresh one, slower to import
+            with self._cond:
+                self.popen = child
+                self._state = dict(self.STARTING)
+                self._ready = False
+                self._stopped = None
+            threading.Thread(target=self._read, args=(child,), name='child-reader',
+                             daemon=True).start()
+            try:
+                self.send(op='config', config=self._config)
+                self.on_started()
+            except self.GONE:
+                pass  # it died already: its reader sees that
+            self._spawn_spare()
+
+    def _spawn_spare(self):
+        """Start a spare and a thread that replaces it if it dies while still a spare."""
+        spare = self._spare = spawn(self.MODULE)
+        threading.Thread(target=self._watch_spare, args=(spare,), name='spare-watch',
                          daemon=True).start()
-        try:
-            self.send(op='config', config=self._config)
-            self.on_started()
-        except self.GONE:
-            pass  # it died already: its reader sees that
-        self._spare = spawn(self.MODULE)
+
+    def _watch_spare(self, spare):
+        code = spare.wait()
+        with self._lifecycle:
+            if spare is not self._spare or self._closing:
+                return  # it became the child (its reader watches it) or we are closing
+            now = time.monotonic()
+            self.spare_deaths.append((now, code))
+            recent = [t for t, _ in self.spare_deaths if now - t < self.RESTART_WINDOW_S]
+            if len(recent) > self.RESTARTS_MAX:
+                self._spare = None
+                self.log.error('%s spare process died %d times in %g s (last exit %s): no '
+                               'spare kept; a death would start a fresh process', self.WHAT,
+                               len(recent), self.RESTART_WINDOW_S, code)
+                return
+            self.log.error('%s spare process died (exit %s); a new spare started', self.WHAT,
+                           code)
+            self._spawn_spare()
 
     def send(self, **request):
         """
@@ -279,27 +402,9 @@ class ChildClient:
     def _read(self, popen):
         for line in popen.stdout:
             try:
-                event = json.loads(line)
-            except ValueError:
-                continue
-            kind = event.pop('ev', None)
-            if kind == 'state':
-                with self._cond:
-                    self._state = event
-            elif kind == 'log':
-                self.log.log(getattr(logging, event['level'].upper(), logging.INFO),
-                             event['message'])
-            elif kind in ('reply', 'ready', 'stopped'):
-                with self._cond:
-                    if kind == 'reply':
-                        self._replies[event['id']] = event
-                    elif kind == 'ready':
-                        self._ready = True
-                    else:
-                        self._stopped = event
-                    self._cond.notify_all()
-            else:
-                self.on_event(kind, event)
+                self._take(json.loads(line))
+            except Exception as exc:  # noqa: B902 (one bad event must not end the reader)
+                self.log.error('%s process: event refused (%r): %.200s', self.WHAT, exc, line)
         with self._cond:
             if popen is not self.popen or self._stopped is not None:
                 return
@@ -309,20 +414,44 @@ class ChildClient:
         if not closing:
             self._replace(popen)
 
+    def _take(self, event):
+        """Act on one event from the child."""
+        kind = event.pop('ev', None)
+        if kind == 'state':
+            with self._cond:
+                self._state = event
+        elif kind == 'log':
+            self.log.log(getattr(logging, event['level'].upper(), logging.INFO),
+                         event['message'])
+        elif kind in ('reply', 'ready', 'stopped'):
+            with self._cond:
+                if kind == 'reply':
+                    self._replies[event['id']] = event
+                elif kind == 'ready':
+                    self._ready = True
+                else:
+                    self._stopped = event
+                self._cond.notify_all()
+        else:
+            self.on_event(kind, event)
+
     def _replace(self, dead):
         """Note the death, and let the spare take over (unless deaths come too often)."""
         code = dead.wait()
-        now = time.monotonic()
-        self.deaths.append((now, code))
-        recent = [t for t, _ in self.deaths if now - t < self.RESTART_WINDOW_S]
-        gave_up = len(recent) > self.RESTARTS_MAX
-        self.death_note = self.death_note_for(code, gave_up)
-        self.log.error('%s', self.death_note)
-        if gave_up:
-            with self._cond:
-                self._state = {**self.STARTING, 'status': ['error', self.death_note]}
-            return
-        self._start_child()
+        with self._lifecycle:
+            if self._closing:
+                return
+            now = time.monotonic()
+            self.deaths.append((now, code))
+            recent = [t for t, _ in self.deaths if now - t < self.RESTART_WINDOW_S]
+            gave_up = len(recent) > self.RESTARTS_MAX
+            self.death_note = self.death_note_for(code, gave_up)
+            self.log.error('%s', self.death_note)
+            if gave_up:
+                with self._cond:
+                    self._state = {**self.STARTING, 'status': ['error', self.death_note]}
+                return
+            self._start_child()
 
     def shutdown(self, reason='shutdown', timeout_s=30.0):
         """Ask the child to stop safely and end the processes; return its ``stopped`` event."""
@@ -339,7 +468,7 @@ class ChildClient:
         return stopped
 
     def _close_all(self):
-        with self._cond:
+        with self._lifecycle, self._cond:
             self._closing = True
         for popen in (self.popen, self._spare):
             if popen is not None:

@@ -27,3 +27,17 @@ class LinkLost(DriverError):
 
 class ExchangeFailed(DriverError):
     """A request still failed after its bounded retries."""
+
+
+class Superseded(DriverError):
+    """
+    A request was dropped before an attempt because its value is no longer wanted.
+
+    ``ambiguous``: an earlier attempt went unanswered, so the device may hold the value
+    anyway: read it back before planning again.
+    """
+
+    def __init__(self, message, ambiguous=False):
+        """Say what was dropped and whether the device may have taken it."""
+        super().__init__(message)
+        self.ambiguous = ambiguous

@@ -23,6 +23,7 @@ Safety rules, in one place:
   stalled reader must never hold up a stop.
 """
 
+import contextlib
 import logging
 import math
 import threading
@@ -116,11 +117,6 @@ class Channel:
         with self._cond:
             self._generation += 1
             self.request(target_a=0.0)
-
-    def ready_to_clear(self):
-        """Return True when connected and a read-back confirmed zero: one look, one lock."""
-        with self._cond:
-            return self.connected and self._zero_confirmed()
 
     def settled_zero(self):
         """Return True when a read-back confirmed a zero setpoint (or it is unreachable)."""
@@ -511,8 +507,8 @@ class CoilBank:
             if active:
                 self._was_enabled = self._enabled
                 self._begin_stop('estop')
-        if active:
-            log.info('coils: safe stop (estop)')
+        if active:  # a warning: never dropped on its way to the node
+            log.warning('coils: safe stop (estop)')
         elif self._was_enabled:
             self.enable(True)
 
@@ -569,15 +565,25 @@ class CoilBank:
                 for channel in self.channels:
                     channel.request(output=False, force_off=late)
                 self._stopping = ''
-            # One look per channel, under its lock: connected and zero confirmed together (a
-            # supply that drops between two looks must not let the fault clear).
-            if self._fault and all(ch.ready_to_clear() for ch in self.channels):
+            if self._fault and self._all_connected_at_zero():
                 cleared, self._fault = self._fault, ''
         if tripped:
             log.warning('coils: watchdog, no command for %.3g s: ramping to zero',
                         self.watchdog_s)
         if cleared:
             log.info('coils: fault cleared (%s); every supply read back zero', cleared)
+
+    def _all_connected_at_zero(self):
+        """
+        Return True when every supply is connected and read back zero, at one instant.
+
+        Every channel's lock is held for the look (bank lock, then channels, as everywhere):
+        a supply that drops between two looks must not let a fault clear.
+        """
+        with contextlib.ExitStack() as held:
+            for channel in self.channels:
+                held.enter_context(channel._cond)
+            return all(ch.connected and ch._zero_confirmed() for ch in self.channels)
 
     def shutdown(self, reason='shutdown', timeout_s=None):
         """

@@ -179,9 +179,11 @@ def test_a_retry_never_resends_a_value_zeroed_by_another_axis_fault(applied):
 
 class Interleaving:
     """
-    Wrap every channel's lock; before lock acquisition number ``drop_at`` (of any channel),
-    drop the victim's link as its worker does on LinkLost (which needs the victim's lock, so
-    only while the victim's lock is free). Records whether and where the drop happened.
+    Wrap every channel's lock to drop one supply's link at a chosen lock acquisition.
+
+    Before acquisition number ``drop_at`` (of any channel's lock) the victim's link drops as
+    its worker does on LinkLost, which needs the victim's lock: so only while that lock is
+    free. ``dropped`` says whether and where the drop happened.
     """
 
     def __init__(self, channels, victim, drop_at):

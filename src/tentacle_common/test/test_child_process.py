@@ -46,7 +46,7 @@ def test_the_child_refuses_a_malformed_request_and_goes_on_serving():
     events = [json.loads(line) for line in stdout.getvalue().splitlines()]
     errors = [e['message'] for e in events if e.get('level') == 'error']
     assert len(errors) == 4
-    assert "request refused (Expecting value" in errors[0] and "'not json" in errors[0]
+    assert 'request refused (Expecting value' in errors[0] and "'not json" in errors[0]
     assert 'a JSON list, not an object' in errors[1]
     assert "request 'boom' failed: KeyError('currents_a')" in errors[2]
     replies = {e['id']: e for e in events if e['ev'] == 'reply'}

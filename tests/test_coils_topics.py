@@ -330,9 +330,9 @@ def test_a_killed_bank_process_is_replaced_and_the_coils_are_zero_and_off(coil_r
     pid = int(bank_value(probe, 'bank_pid', t0)[0])
     os.kill(pid, signal.SIGKILL)
     t_kill = time.monotonic()
+    # How fast is bench/coils_failover.py's figure; here: that it happens.
     assert wait_for(lambda: emulators.setpoints() == [0.0] * 3 and not any(emulators.outputs()),
-                    timeout_s=3.0)
-    assert time.monotonic() - t_kill < 1.5  # within 1 s, plus this probe's polling
+                    timeout_s=15.0)
     assert node.popen.poll() is None
     assert wait_for(lambda: 'coil bank process died (exit -9)' in node.output())
     assert '[ERROR]' in node.output().split('coil bank process died')[0].splitlines()[-1]
@@ -343,3 +343,58 @@ def test_a_killed_bank_process_is_replaced_and_the_coils_are_zero_and_off(coil_r
     assert emulators.setpoints() == [0.0] * 3
     assert probe.enable(True).success
     assert drive(emulators, probe, [1e-3, 1e-3, 1e-3])
+
+
+def children(pid):
+    """Return the pids of a process's children (every thread's), from /proc."""
+    pids = []
+    for task in os.listdir(f'/proc/{pid}/task'):
+        with open(f'/proc/{pid}/task/{task}/children') as handle:
+            pids += [int(p) for p in handle.read().split()]
+    return pids
+
+
+def test_the_bank_and_its_spare_killed_together_leave_the_coils_zero_and_off(coil_rig, probe):
+    # Every child process of coils_node is killed while a field is held: no process was left
+    # to zero the supplies, and none was started.
+    emulators, node = coil_rig('dxkdp', 9600)
+    ready(emulators, probe)
+    probe.command_field([8e-3, -8e-3, 8e-3])
+    assert wait_for(lambda: emulators.setpoints()[0] > 15.0)
+    t0 = time.monotonic()
+    assert wait_for(lambda: (bank_value(probe, 'spare_pid', t0) or ('none',))[0] != 'none')
+    pids = children(node.popen.pid)
+    assert len(pids) == 2, f'expected a bank and a spare, found {pids}'
+    assert emulators.setpoints()[0] > 15.0 and all(emulators.outputs())  # still held
+    for pid in pids:
+        os.kill(pid, signal.SIGKILL)
+    t_kill = time.monotonic()
+    assert wait_for(lambda: emulators.setpoints() == [0.0] * 3 and not any(emulators.outputs()),
+                    timeout_s=15.0), f'supplies hold {emulators.setpoints()}: {node.output()}'
+    assert node.popen.poll() is None
+    assert wait_for(lambda: 'coil bank process died (exit -9)' in node.output())
+    assert '[ERROR]' in node.output().split('coil bank process died')[0].splitlines()[-1]
+    assert wait_for(lambda: (bank_value(probe, 'bank_deaths', t_kill) or ('0',))[0] != '0')
+    assert bank_value(probe, 'bank_deaths', t_kill)[1].level == DiagnosticStatus.ERROR
+    # A spare is kept again, and neither of the killed processes is it.
+    assert wait_for(lambda: (bank_value(probe, 'spare_pid', t_kill) or ('none',))[0] not in (
+        'none', *map(str, pids)), timeout_s=15.0)
+    assert probe.enable(True).success
+    assert drive(emulators, probe, [1e-3, 1e-3, 1e-3])
+
+
+def test_a_killed_spare_is_replaced_at_once(coil_rig, probe):
+    emulators, node = coil_rig('dxkdp', 115200)
+    ready(emulators, probe)
+    t0 = time.monotonic()
+    assert wait_for(lambda: (bank_value(probe, 'spare_pid', t0) or ('none',))[0] != 'none')
+    spare, bank = (int(bank_value(probe, key, t0)[0]) for key in ('spare_pid', 'bank_pid'))
+    os.kill(spare, signal.SIGKILL)
+    assert wait_for(lambda: 'spare process died (exit -9); a new spare started'
+                    in node.output())
+    t_kill = time.monotonic()
+    assert wait_for(lambda: (bank_value(probe, 'spare_deaths', t_kill) or ('0',))[0] == '1')
+    new_spare = bank_value(probe, 'spare_pid', t_kill)[0]
+    assert new_spare not in ('none', str(spare))
+    assert bank_value(probe, 'bank_pid', t_kill)[0] == str(bank)  # the bank went on
+    assert drive(emulators, probe, [1e-3, 2e-3, 3e-3])

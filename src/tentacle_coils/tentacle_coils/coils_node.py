@@ -152,7 +152,9 @@ class CoilsNode(Node):
         array.status.append(diagnostic_status(
             'coils: bank', 'coils', level, message,
             {'commands_rejected': self.rejected, 'last_rejection': self.last_rejection,
-             'bank_pid': self.bank.popen.pid, 'bank_deaths': len(self.bank.deaths)}))
+             'bank_pid': self.bank.popen.pid, 'bank_deaths': len(self.bank.deaths),
+             'spare_pid': self.bank.spare_pid or 'none',
+             'spare_deaths': len(self.bank.spare_deaths)}))
         for snap in self.bank.snapshots():
             if not snap['connected']:
                 level, message = 'error', f"disconnected: {snap['last_error']}"

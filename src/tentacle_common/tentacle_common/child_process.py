@@ -325,6 +325,12 @@ class ChildClient:
         return self._state
 
     @property
+    def spare_pid(self):
+        """Return the spare process's pid, or None when no spare is alive."""
+        spare = self._spare
+        return spare.pid if spare is not None and spare.poll() is None else None
+
+    @property
     def running(self):
         """Return True while a child is up and has not stopped."""
         return self._ready and self._stopped is None

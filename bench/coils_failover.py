@@ -48,7 +48,7 @@ BOUND_S = 1.5
 
 
 def children(pid):
-    """Return the pids of a process's children, from /proc."""
+    """Return the pids a process has started (from every thread), read from /proc."""
     pids = []
     for task in os.listdir(f'/proc/{pid}/task'):
         with open(f'/proc/{pid}/task/{task}/children') as handle:

@@ -346,7 +346,7 @@ def test_a_killed_bank_process_is_replaced_and_the_coils_are_zero_and_off(coil_r
 
 
 def children(pid):
-    """Return the pids of a process's children (every thread's), from /proc."""
+    """Return the pids a process has started (from every thread), read from /proc."""
     pids = []
     for task in os.listdir(f'/proc/{pid}/task'):
         with open(f'/proc/{pid}/task/{task}/children') as handle:

@@ -42,6 +42,7 @@ class AxisWorker:
         self.gave_up = ''           # why connecting stopped for good ('' while it goes on)
         self.error = ''             # the last fault, '' after a good move
         self.moves = self.refusals = 0
+        self.stop_sent = False      # the stop at shutdown went to the stage
         self.stopped = False        # the stop at shutdown was answered by the stage
         self._thread = threading.Thread(target=self._run, name='axis-worker', daemon=True)
 
@@ -250,10 +251,14 @@ class AxisWorker:
             home.set()
 
     def _close(self):
-        try:
-            if self.connected:
+        if self.connected:  # a device that never answered is sent nothing, not even a stop
+            try:
                 self.stage.stop()
+                self.stop_sent = True
                 self.stopped = self.stage.measured  # a step1mm stop is sent, never confirmed
-        except DriverError as exc:
-            self.error = f'stop at shutdown: {exc}'
+            except (LinkLost, NeverAnswered) as exc:
+                self.error = f'stop at shutdown: {exc}'
+            except DriverError as exc:  # it went out; what came back was not a confirmation
+                self.stop_sent = True
+                self.error = f'stop at shutdown: {exc}'
         self.stage.line.close()

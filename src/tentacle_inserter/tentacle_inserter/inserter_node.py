@@ -26,7 +26,7 @@ from std_srvs.srv import SetBool, Trigger
 from tentacle_common.driver_node import (declare_parameters, diagnostic_status,
                                          RosLogHandler, run_node)
 from tentacle_inserter.axis_process import AxisClient, LOGGER
-from tentacle_inserter.params import INSERTER_PARAMS, NODE_NAME
+from tentacle_inserter.params import check_axis, INSERTER_PARAMS, NODE_NAME
 from tentacle_inserter.stage import TargetRefused
 
 
@@ -37,7 +37,7 @@ class InserterNode(Node):
         """Declare the parameters, start the axis process, wire topics and services."""
         super().__init__(NODE_NAME)
         p = declare_parameters(self, INSERTER_PARAMS)
-        self.axis = p['axis'].strip('/')
+        self.axis = check_axis(p['axis'])  # before the axis process: nothing is started
         logger = logging.getLogger(LOGGER)
         logger.addHandler(RosLogHandler(self.get_logger()))
         logger.setLevel(logging.INFO)

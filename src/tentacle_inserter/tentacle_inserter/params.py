@@ -6,9 +6,13 @@ descriptor, ``inserter_node --help`` prints the table, and what a lab writes is 
 against it before rcl reads it. Names are those of DESIGN.md; units are in the descriptions.
 """
 
+import re
+
+from tentacle_common.errors import ConfigError
 from tentacle_common.params import Param
 
 NODE_NAME = 'inserter_node'
+_NAME_TOKEN = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')  # a ROS name token (rcl's rule)
 
 INSERTER_PARAMS = (
     Param('port', '/dev/ttyACM0', 'serial device path of the stage'),
@@ -34,3 +38,17 @@ INSERTER_PARAMS = (
     Param('step1mm_retract', '1', "step1mm: the character that retracts 1 mm (earlier: '2')"),
     Param('step1mm_stop', '3', 'step1mm: the character that stops'),
 )
+
+
+def check_axis(axis):
+    """
+    Return the axis name without surrounding slashes if it is one ROS name token.
+
+    :raises ConfigError: anything else (it becomes /<axis>/target, /<axis>/state, ...)
+    """
+    name = str(axis).strip('/')
+    if not _NAME_TOKEN.fullmatch(name):
+        raise ConfigError(f'axis: {axis!r} is not a ROS name token (letters, digits and _, '
+                          f'not starting with a digit), as its topics /<axis>/target, '
+                          '/<axis>/state, ... need: e.g. inserter or backbone')
+    return name

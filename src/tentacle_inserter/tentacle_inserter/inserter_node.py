@@ -8,7 +8,9 @@ velocity m/s, at ``state_rate``), /<axis>/stop and /<axis>/home (std_srvs/Trigge
 /estop (std_msgs/Bool, transient local) honoured, /diagnostics. A target that is not finite or is
 outside [0, max_length] is refused with a logged reason and never reaches the wire; the
 axis moves to the latest target only, a move that does not end in its expected time stops
-the axis, and after a stop or a lost line it must be homed again (home: "zero is here").
+the axis, and after a stop or a lost line it must be homed again (home: "zero is here"); a
+target that arrives while the line is down is refused, never kept for the reconnect. An
+``axis`` that is not one ROS name token is refused at start (exit 2).
 A step1mm axis reports a counted position: /diagnostics says it is estimated. The axis logic
 is tentacle_inserter.axis_worker and stage (no rclpy), run in a process of its own
 (axis_process) so that the axis stops however this node dies; this module is the ROS glue.

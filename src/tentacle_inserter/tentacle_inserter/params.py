@@ -18,7 +18,8 @@ INSERTER_PARAMS = (
     Param('port', '/dev/ttyACM0', 'serial device path of the stage'),
     Param('dialect', 'gcode', 'stage wire dialect: gcode or step1mm'),
     Param('baud', 115200, 'serial line rate, bit/s (step1mm: 9600)', 300, 4_000_000),
-    Param('axis', 'inserter', 'topic namespace: /<axis>/target, /<axis>/state, ...'),
+    Param('axis', 'inserter', 'topic namespace, one ROS name token (letters, digits, _): '
+          '/<axis>/target, /<axis>/state, ...'),
     Param('max_length', 0.1, 'soft limit: targets in [0, max_length], metre', 0.0, 10.0),
     Param('max_speed', 0.005, 'speed of every move, metre per second (step1mm: the '
           "firmware's own, for the moves' expected time)", 1e-6, 1.0),
@@ -31,7 +32,7 @@ INSERTER_PARAMS = (
     Param('time_margin', 1.5, 'a move may take its expected time times this', 1.0, 100.0),
     Param('slack_s', 0.5, '... plus this before it counts as stalled, second', 0.0, 60.0),
     Param('restart_timeout_s', 5.0, 'gcode: wait for a firmware that restarts after M112 '
-          '(M999 refused), second', 0.0, 120.0),
+          '(M999 refused), and for a first answer after the port opens, second', 0.0, 120.0),
     Param('state_rate', 20.0, 'rate of /<axis>/state, hertz', 0.1, 1000.0),
     Param('step1mm_extend', '2',
           "step1mm: the character that extends 1 mm (earlier lab code: '1')"),

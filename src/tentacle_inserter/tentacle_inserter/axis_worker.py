@@ -66,7 +66,7 @@ class AxisWorker:
                     raise TargetRefused('estop active: no motion until it is released')
                 if not self._enabled:
                     raise TargetRefused('axis disabled: enable it first')
-                if not self.connected:  # kept, it would move an axis that comes back unhomed
+                if not self.connected:  # kept, it would be replayed after the reconnect
                     raise TargetRefused('not connected: ' + (self.error or 'the line is down')
                                         + ' (a target is not kept for when it is back)')
                 if not self.stage.homed:

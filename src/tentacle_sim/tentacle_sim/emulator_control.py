@@ -20,6 +20,11 @@ import signal
 import sys
 
 
+# Fault options that are numbers (counts, seconds, metres, amperes, a factor, a code), or
+# null where that means 'any' (on_current_a).
+NUMBERS = ('count', 'late_s', 'duration_s', 'factor', 'after_m', 'code', 'on_current_a')
+
+
 def line_rate(text):
     """
     Return a baud (bit/s) from the command line: a positive integer.
@@ -50,6 +55,11 @@ def handle(request, devices):
             since = float(request.get('since', 0.0))
             return {'log': [e for e in list(emu.log) if e['t'] >= since]}
         options = {k: v for k, v in request.items() if k not in ('op', 'port', 'kind')}
+        for name, value in options.items():
+            # A device thread would meet a malformed number later, and die of it.
+            if name in NUMBERS and value is not None and (
+                    isinstance(value, bool) or not isinstance(value, (int, float))):
+                return {'error': f'{name}: {value!r} is not a number'}
         emu.inject(request.get('kind'), **options)
         return {'ok': True}
     return {'error': f'unknown op {op!r}'}

@@ -48,14 +48,15 @@ def test_a_malformed_control_line_is_answered_and_the_loop_goes_on(serve):
     replies, device = serve([
         '[1]', '"state"', 'null', 'not json', '{"op": "fault", "port": "e", "kind": "bogus"}',
         '{"op": "fault", "port": "x", "kind": "no_reply"}',
+        '{"op": "fault", "port": "e", "kind": "no_reply", "count": [2]}',
         '{"op": "fault", "port": "e", "kind": "no_reply", "colour": 3}',
         '{"op": "log", "port": "e", "since": "soon"}', '{"op": "dance"}',
         '{"op": "fault", "port": "e", "kind": "no_reply", "count": 2}', '{"op": "state"}',
         '{"op": "quit"}', '{"op": "state"}'])
     assert replies[:3] == [{'error': 'a control request is a JSON object, got ' + kind}
                            for kind in ('list', 'str', 'NoneType')]
-    assert all('error' in r for r in replies[3:9]), replies
-    assert replies[9:] == [{'ok': True}, {'e': {'faults': [['no_reply', 2]]}}]  # then quit
+    assert all('error' in r for r in replies[3:10]), replies
+    assert replies[10:] == [{'ok': True}, {'e': {'faults': [['no_reply', 2]]}}]  # then quit
 
 
 @pytest.mark.parametrize('main', [emulate_stages.build_parser, emulate_supplies.build_parser])

@@ -232,18 +232,25 @@ def test_a_lost_line_reconnects_reads_back_and_replays_nothing(axis):
     probe, emu, node = axis
     probe.target(0.01)
     assert wait_for(lambda: emu.state()['moving'], 5.0)
-    emu.inject('disconnect', duration_s=1.0)
+    outage_s = 5.0               # long enough for the status, the target and its refusal
+    emu.inject('disconnect', duration_s=outage_s)
     t_lost = time.monotonic()
     assert wait_for(lambda: (probe.status(t_lost) or (None,))[0] == DiagnosticStatus.ERROR,
                     4.0)
-    assert wait_for(lambda: sent(emu, 'M114', t_lost + 1.0), 6.0)     # read back, again
+    probe.target(0.03)           # during the outage: refused, not kept for the reconnect
+    assert wait_for(lambda: 'target refused: not connected' in node.output(), 4.0), \
+        node.output()
+    assert not emu.state()['connected']                   # it was refused in the outage
+    assert wait_for(lambda: sent(emu, 'M114', t_lost + outage_s), 6.0)   # read back, again
     t_back = time.monotonic()
     assert wait_for(lambda: (probe.status(t_back) or (None, ''))[1].startswith(
         'not homed'), 4.0)
-    assert not sent(emu, 'G1', t_lost)                    # the old target is not replayed
+    travel = emu.state()['travel_m']
+    assert not sent(emu, 'G1', t_lost)                    # neither target is replayed
     probe.target(0.02)                                    # nor a new one taken, unhomed
     assert wait_for(lambda: 'not homed' in node.output().split('line lost')[-1], 3.0)
     assert not sent(emu, 'G1', t_lost) and not emu.state()['busy']
+    assert emu.state()['travel_m'] == travel              # nothing moved it since the return
 
 
 def test_a_firmware_reset_mid_move_is_caught_and_read_back(axis):
@@ -345,3 +352,14 @@ def test_inserter_and_backbone_side_by_side_gcode_and_step1mm(tmp_path):
         codes = [node.stop() for node in nodes]
         emus.stop()
     assert codes == [0, 0], [node.output() for node in nodes]
+
+
+def test_an_axis_name_that_is_no_ros_name_is_refused_at_start(tmp_path):
+    node = start_node(tmp_path, str(tmp_path / 'absent'), axis='in-serter')
+    try:
+        code = node.popen.wait(30)
+    finally:
+        node.stop()
+    assert code == 2, node.output()
+    assert "axis: 'in-serter' is not a ROS name token" in node.output()
+    assert 'Traceback' not in node.output()

@@ -8,7 +8,9 @@ velocity m/s, at ``state_rate``), /<axis>/stop and /<axis>/home (std_srvs/Trigge
 /estop (std_msgs/Bool, transient local) honoured, /diagnostics. A target that is not finite or is
 outside [0, max_length] is refused with a logged reason and never reaches the wire; the
 axis moves to the latest target only, a move that does not end in its expected time stops
-the axis, and after a stop or a lost line it must be homed again (home: "zero is here").
+the axis, and after a stop or a lost line it must be homed again (home: "zero is here"); a
+target that arrives while the line is down is refused, never kept for the reconnect. An
+``axis`` that is not one ROS name token is refused at start (exit 2).
 A step1mm axis reports a counted position: /diagnostics says it is estimated. The axis logic
 is tentacle_inserter.axis_worker and stage (no rclpy), run in a process of its own
 (axis_process) so that the axis stops however this node dies; this module is the ROS glue.
@@ -26,7 +28,7 @@ from std_srvs.srv import SetBool, Trigger
 from tentacle_common.driver_node import (declare_parameters, diagnostic_status,
                                          RosLogHandler, run_node)
 from tentacle_inserter.axis_process import AxisClient, LOGGER
-from tentacle_inserter.params import INSERTER_PARAMS, NODE_NAME
+from tentacle_inserter.params import check_axis, INSERTER_PARAMS, NODE_NAME
 from tentacle_inserter.stage import TargetRefused
 
 
@@ -37,7 +39,7 @@ class InserterNode(Node):
         """Declare the parameters, start the axis process, wire topics and services."""
         super().__init__(NODE_NAME)
         p = declare_parameters(self, INSERTER_PARAMS)
-        self.axis = p['axis'].strip('/')
+        self.axis = check_axis(p['axis'])  # before the axis process: nothing is started
         logger = logging.getLogger(LOGGER)
         logger.addHandler(RosLogHandler(self.get_logger()))
         logger.setLevel(logging.INFO)

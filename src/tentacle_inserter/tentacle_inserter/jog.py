@@ -7,7 +7,13 @@ Jog one linear axis from the terminal: by +/- mm or to a position, home, positio
 It talks to the stage itself, over its serial line, with inserter_node's driver and worker
 (stage.py, axis_worker.py) and parameters (a params file's inserter_node section, then the
 options), so inserter_node must not hold the port meanwhile. Positions are mm on the command
-line and metres inside. A gcode axis starts unhomed: ``home`` makes where it stands zero.
+line and metres inside. The axis starts unhomed (either dialect): ``home`` makes where it
+stands zero; a stop unhomes it again. Every action on the command line is checked before the
+port is opened (its syntax; each target against [0, max_length] and, step1mm, the whole mm,
+relative moves from the position the actions before them leave, from 0 after ``home``): one
+bad action refuses the whole list and nothing is done. The actions then run in turn, up to
+the first that fails. Exit status: 0 all done, 1 an action or the connection failed, 2 a
+usage error (a bad action, option or parameter; nothing was done).
 Ctrl-C stops the axis, and the script says whether the stage confirmed it (read back)
 before it exits; a second Ctrl-C does not cut that short.
 """
@@ -24,8 +30,9 @@ from tentacle_inserter.axis_worker import AxisWorker
 from tentacle_inserter.params import INSERTER_PARAMS, NODE_NAME
 from tentacle_inserter.stage import TargetRefused
 
-CONNECT_TIMEOUT_S = 5.0
+CONNECT_TIMEOUT_S = 5.0  # beyond the driver's own wait for a first answer (s)
 SHOW_PERIOD_S = 0.1
+USAGE_EXIT = 2  # as argparse's: nothing was done
 HELP = 'actions: +N / -N (mm, relative), =N (mm, absolute), h(ome), s(top), p(osition), q(uit)'
 
 
@@ -48,6 +55,41 @@ def parse_action(text):
     if mm != mm or mm in (float('inf'), float('-inf')):
         raise ValueError(f'{text!r}: not a finite number of mm')
     return kind, mm * 1e-3
+
+
+class ActionsRefused(ValueError):
+    """An action of the command line is malformed, or refused before the first motion."""
+
+
+def plan(actions, stage):
+    """
+    Check every action before the first motion; return them as (text, kind, value).
+
+    The axis starts unhomed (a connect unhomes it), ``home`` makes the position 0, a stop
+    unhomes it and loses the position; a move needs a homed axis and its target must be one
+    ``stage.check`` takes. A relative move becomes the absolute target it was checked as.
+
+    :param stage: the (not connected) driver: its ``check`` says what targets it takes
+    :raises ActionsRefused: the first bad action, named with its place in the list
+    """
+    planned, homed, position = [], False, None
+    for number, text in enumerate(actions, 1):
+        try:
+            kind, value = parse_action(text)
+            if kind == 'home':
+                homed, position = True, 0.0
+            elif kind == 'stop':
+                homed, position = False, None
+            elif kind in ('by', 'to'):
+                if not homed:
+                    raise ValueError('the axis is not homed there (it starts unhomed, and a '
+                                     'stop unhomes it): put home before it')
+                value = stage.check(value if kind == 'to' else position + value)
+                kind, position = 'to', value
+        except (ValueError, TargetRefused) as exc:
+            raise ActionsRefused(f'action {number} {text!r}: {exc}') from None
+        planned.append((text, kind, value))
+    return planned
 
 
 def describe(snap):
@@ -77,10 +119,14 @@ class Jog:
         self.out.write(f'\r{describe(self.worker.snapshot())}\033[K{end}')
         self.out.flush()
 
-    def do(self, text):
-        """Carry out one action; return False for quit. Failures are written and counted."""
+    def do(self, text, action=None):
+        """
+        Carry out one action; return False for quit. Failures are written and counted.
+
+        :param action: (kind, value) as ``plan`` made it; None: parse text
+        """
         try:
-            kind, value = parse_action(text)
+            kind, value = action or parse_action(text)
             if kind == 'quit':
                 return False
             if kind == 'home':
@@ -150,6 +196,29 @@ def build_parser():
     return parser
 
 
+def connect(worker, wait_s):
+    """Return True once the worker is connected; False if it gave up or wait_s (s) passed."""
+    deadline = time.monotonic() + wait_s
+    while time.monotonic() < deadline and not worker.gave_up:
+        if worker.connected:
+            return True
+        time.sleep(0.02)
+    return worker.connected  # once more at the deadline
+
+
+def farewell(worker, confirmed):
+    """Return the last line: whether a stop reached the stage, and whether it confirmed it."""
+    position = worker.snapshot()['position_m']
+    where = f' at {position * 1e3:.3f} mm' if position is not None else ''
+    if confirmed:
+        return f'axis stopped{where} (read back)'
+    if worker.stop_sent:
+        return (f'stop sent{where}, NOT confirmed by the stage'
+                f"{' (step1mm has no readback)' if not worker.stage.measured else ''}")
+    why = ('the device never answered' if worker.gave_up else 'no connection')
+    return f'no stop sent ({why}): the state of the axis is unknown: check it'
+
+
 def main(args=None):
     """Run the actions (or interactively); stop the axis on exit, however it comes."""
     opts = build_parser().parse_args(args)
@@ -157,21 +226,27 @@ def main(args=None):
                  if getattr(opts, p.name, None) is not None}
     try:
         params = resolve(INSERTER_PARAMS, NODE_NAME, opts.params, overrides)
-        worker = AxisWorker(make_stage(params)).start()
-    except ConfigError as exc:
-        sys.exit(f'jog: {exc}')
+        stage = make_stage(params)
+        planned = plan(opts.actions, stage)
+    except (ConfigError, ActionsRefused) as exc:
+        print(f'jog: {exc}; nothing was done', file=sys.stderr)
+        sys.exit(USAGE_EXIT)
+    worker = AxisWorker(stage).start()
     jog = Jog(worker)
     try:
-        deadline = time.monotonic() + CONNECT_TIMEOUT_S
-        while not worker.connected and time.monotonic() < deadline:
-            time.sleep(0.02)
-        if not worker.connected:
+        if not connect(worker, params['restart_timeout_s'] + CONNECT_TIMEOUT_S):
             raise ConfigError(f"{params['port']}: {worker.error or 'no connection'}")
         jog.show()
         if not opts.actions:
             jog.interact()
-        for action in opts.actions:
-            if not jog.do(action):
+        for number, (text, kind, value) in enumerate(planned, 1):
+            if not jog.do(text, (kind, value)):
+                break
+            if jog.failures:
+                rest = len(planned) - number
+                if rest:
+                    sys.stdout.write(f'jog: stopped at action {number} {text!r}: the {rest} '
+                                     'after it were not carried out\n')
                 break
     except KeyboardInterrupt:
         sys.stdout.write('\nCtrl-C: stopping the axis\n')
@@ -180,13 +255,7 @@ def main(args=None):
         jog.failures += 1
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # the stop below is not cut short
-        confirmed = worker.shutdown()
-        position = worker.snapshot()['position_m']
-        where = f' at {position * 1e3:.3f} mm' if position is not None else ''
-        sys.stdout.write(f'axis stopped{where} (read back)\n' if confirmed else
-                         f'stop sent{where}, NOT confirmed by the stage'
-                         f"{' (step1mm has no readback)' if not worker.stage.measured else ''}"
-                         '\n')
+        sys.stdout.write(farewell(worker, worker.shutdown()) + '\n')
     sys.exit(1 if jog.failures else 0)
 
 

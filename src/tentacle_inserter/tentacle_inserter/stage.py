@@ -9,10 +9,17 @@ within its trapezoid's time (trapezoid.py) times ``time_margin`` plus ``slack_s`
 axis is stopped (M112, then M999) and the position read back from the device, never assumed.
 
 A firmware counts steps from where it started: after a connect (a board resets when its
-USB line opens) or a halt and reset its count says nothing of where the axis is. So a gcode
-axis starts unhomed and refuses moves until ``home()`` (there are no end stops: home is
-"zero is here", G92 E0); a stop unhomes it again. No target is ever replayed. A step1mm axis
-has no reply and no readback: its position is counted, and says so (``measured``).
+USB line opens) or a halt and reset its count says nothing of where the axis is. So an axis
+starts unhomed and refuses moves until ``home()`` (there are no end stops: home is "zero is
+here", G92 E0); a stop unhomes it again. The same rule holds for both dialects. No target is
+ever replayed. A step1mm axis has no reply and no readback: its position is counted, and says
+so (``measured``); it moves in whole millimetres and refuses a target between them.
+
+Until the device at the far end has given one valid gcode reply since the port opened, it is
+unknown: it may be another firmware (a step1mm stage takes the digits of ``M112`` and
+``M114`` as 1 mm moves) or run at another baud. So a gcode connect sends one probe (G90, no
+digit a step1mm firmware moves on) and listens; nothing more is ever sent to a device that
+has not answered (NeverAnswered), not even a stop.
 """
 
 import math
@@ -25,6 +32,9 @@ from tentacle_inserter.trapezoid import move_time_s, position_at
 POLL_S = 0.01  # how often a waiting move looks whether it was cancelled (s)
 RESTART_POLL_S = 0.1  # how often a halted firmware is asked whether it is back (s)
 STEP1MM_SETTLE_S = 0.02  # a step1mm move is waited for this beyond its expected time (s)
+GRID_TOLERANCE_M = 1e-6  # a step1mm target this close to a whole mm is on it (float noise)
+# Reply kinds that only a gcode firmware sends (an 'other' line may be anything's noise).
+GCODE_REPLIES = ('ok', 'error', 'start', 'position')
 
 
 class TargetRefused(DriverError):
@@ -45,6 +55,10 @@ class MoveStopped(DriverError):
 
 class StillHalted(DriverError):
     """After M112 the firmware neither took M999 nor restarted in time: reset the board."""
+
+
+class NeverAnswered(DriverError):
+    """The device gave no valid gcode reply since the port opened: nothing more is sent."""
 
 
 def check_target(target_m, max_length_m):
@@ -93,16 +107,44 @@ class GcodeStage:
         self.attempts = Attempts(line, retries=retries, max_turnaround_s=reply_timeout_s)
         self.position_m = None  # as last read back (None: unknown)
         self.homed = False
+        self.answered = False   # a valid gcode reply came since the port opened
         self._motion = None     # (start m, target m, when it began s) of the move under way
 
+    def check(self, target_m):
+        """
+        Return target_m (m) as a float if the axis may go there.
+
+        :raises TargetRefused: not a number, not finite, or outside [0, max_length_m]
+        """
+        return check_target(target_m, self.max_length_m)
+
     # -- exchanges --------------------------------------------------------------------------
+    def _write(self, request):
+        """
+        Send bytes to a device known to speak gcode; return when they leave the line (s).
+
+        :raises NeverAnswered: it has not answered since the port opened: nothing is sent
+        """
+        if not self.answered:
+            raise NeverAnswered(f'{self.line.path}: the device never answered since the port '
+                                f'opened: {request.decode().strip()} not sent; its state is '
+                                'unknown')
+        return self.line.write(request)
+
+    def _reply(self, deadline):
+        """Return (kind, value) of the next reply line; note a device that speaks gcode."""
+        kind, value = gcode.parse_reply(self.line.read_until(gcode.TERMINATOR, deadline))
+        if kind in GCODE_REPLIES or (kind == 'other' and value.startswith('echo:')):
+            self.answered = True
+        return kind, value
+
     def _exchange(self, request, timeout_s):
         """Send one line; return the lines before its ``ok`` (raise Refused on Error:)."""
-        self.line.write(request)
+        self._write(request)
         deadline = self.line.now() + timeout_s
         lines = []
         while True:
-            kind, value = gcode.parse_reply(self.line.read_until(gcode.TERMINATOR, deadline))
+            kind, value = self._reply(deadline)
             if kind == 'ok':
                 return lines
             if kind == 'error':
@@ -129,16 +171,51 @@ class GcodeStage:
 
         A move queued before a line loss, or by a driver process that died, may still be
         running, and nobody is waiting for it any more: unless M400 answers at once (no
-        motion), the axis is halted (M112, M999) first.
+        motion), the axis is halted (M112, M999) first. All of that only once the device
+        has answered the probe (``_first_contact``).
+
+        :raises NeverAnswered: no valid gcode reply to the one probe (nothing more sent)
         """
         self.line.open()
+        self.answered, self.homed = False, False
         self.attempts.resync()
+        self._first_contact()
         if not self._idle():
             self._halt()
         self._command(gcode.absolute())
         self._command(gcode.steps_per_mm(self.steps_per_mm))
         self.homed = False
         return self.read_position()
+
+    def _first_contact(self):
+        """
+        Send one probe (G90) and listen for a valid gcode reply, up to restart_timeout_s.
+
+        A board that resets when its port opens may lose the probe while it boots; it then
+        says ``start`` (and echo lines), which is as good an answer: its late chatter is
+        drained. Listening is harmless, so a slow board is waited for; sending is not, so
+        the probe is never repeated.
+
+        :raises NeverAnswered: nothing valid came: not a gcode firmware at this baud
+        """
+        self.line.write(gcode.absolute())  # no 1, 2 or 3: no step1mm mapping moves on it
+        wait_s = max(self.restart_timeout_s, self.reply_timeout_s)
+        deadline = self.line.now() + wait_s
+        while True:
+            try:
+                kind, _ = self._reply(deadline)
+            except (FrameError, ReplyTimeout):  # noise (another baud?) or a babbling line
+                if self.line.now() >= deadline:
+                    raise NeverAnswered(
+                        f'{self.line.path}: no gcode reply in {wait_s:g} s to one probe (G90) '
+                        f'at {self.line.baud} bit/s: not a gcode firmware (a step1mm stage '
+                        'never answers: dialect step1mm), or another baud. Nothing more was '
+                        'sent, not even a stop: the axis state is unknown') from None
+                continue
+            if self.answered:
+                if kind != 'ok':  # boot chatter, and the probe's own ok, may still come
+                    self.line.discard_input(quiet_s=self.reply_timeout_s)
+                return
 
     def home(self):
         """Call where the axis stands zero (G92 E0): it may move from now on."""
@@ -156,7 +233,7 @@ class GcodeStage:
         :raises MoveFailed: it did not end in time: the axis was stopped, position read back
         :raises MoveStopped: cancelled: the axis was stopped (stop())
         """
-        target = check_target(target_m, self.max_length_m)
+        target = self.check(target_m)
         if not self.homed:
             raise NotHomed('the axis is not homed (after a connect or a stop): home it first')
         start = self.position_m if self.position_m is not None else self.read_position()
@@ -206,12 +283,11 @@ class GcodeStage:
         :raises ReplyTimeout: no ok within allowed_s
         :raises Refused: an error, or the firmware restarted (it says start)
         """
-        self.line.write(gcode.wait_for_motion())
+        self._write(gcode.wait_for_motion())
         deadline = self.line.now() + allowed_s
         while not cancelled():
             if self.line.wait_input(min(deadline, self.line.now() + POLL_S)):
-                kind, value = gcode.parse_reply(self.line.read_until(gcode.TERMINATOR,
-                                                                     deadline))
+                kind, value = self._reply(deadline)
                 if kind == 'ok':
                     return True
                 if kind == 'error':
@@ -223,7 +299,11 @@ class GcodeStage:
         return False
 
     def stop(self):
-        """Halt at once (M112), reset (M999), read the count back; unhome; return it (m)."""
+        """
+        Halt at once (M112), reset (M999), read the count back; unhome; return it (m).
+
+        :raises NeverAnswered: the device never answered since the port opened: nothing sent
+        """
         self._halt()
         return self.read_position()
 
@@ -246,8 +326,9 @@ class GcodeStage:
         restart forgets them).
 
         :raises StillHalted: it did not come back in time
+        :raises NeverAnswered: the device never answered: nothing sent
         """
-        self.line.write(gcode.halt())   # Marlin answers nothing to M112
+        self._write(gcode.halt())   # Marlin answers nothing to M112
         self.homed, self._motion = False, None
         self.attempts.out_of_step = True  # drop whatever a halted firmware still says
         try:
@@ -277,7 +358,8 @@ class Step1mmStage:
 
     A move is waited for its expected time (1 mm moves at the firmware's speed and
     acceleration, which the parameters must match), so the next target follows it; a
-    cancelled move sends the stop character and counts where the profile had got to.
+    cancelled move sends the stop character and counts where the profile had got to. As a
+    gcode axis, it starts unhomed, a stop unhomes it, and it moves only once homed.
     """
 
     measured = False  # no readback: the position is counted
@@ -288,17 +370,35 @@ class Step1mmStage:
         self.line, self.max_length_m, self.mapping = line, float(max_length_m), mapping
         self.step_time_s = move_time_s(step1mm.STEP_M, speed_m_s, accel_m_s2)
         self.position_m = float(start_m)
+        self.homed = False
         self._motion = None  # (start m, end m, when it began s, how long it takes s)
 
+    def check(self, target_m):
+        """
+        Return target_m (m) as a float if the axis may go there: in range, on a whole mm.
+
+        :raises TargetRefused: not a number, not finite, outside [0, max_length_m], or
+            between whole millimetres (the firmware's resolution is 1 mm)
+        """
+        target = check_target(target_m, self.max_length_m)
+        off_m = abs(target - round(target / step1mm.STEP_M) * step1mm.STEP_M)
+        if off_m > GRID_TOLERANCE_M:
+            raise TargetRefused(f'target {target * 1e3:.6g} mm is not a whole number of mm: '
+                                f'a step1mm axis moves in steps of {step1mm.STEP_M * 1e3:g} mm '
+                                '(its resolution)')
+        return target
+
     def connect(self):
-        """Open the line and stop whatever may be going on."""
+        """Open the line and stop whatever may be going on; unhome."""
         self.line.open()
+        self.homed = False
         self.line.write(self.mapping.command(0))
         return self.position_m
 
     def home(self):
-        """Count from zero here; return 0."""
+        """Count from zero here; return 0. The axis may move from now on."""
         self.position_m = 0.0
+        self.homed = True
         return self.position_m
 
     def move_to(self, target_m, cancelled=lambda: False):
@@ -306,10 +406,13 @@ class Step1mmStage:
         Send the 1 mm steps towards target_m (whole mm) and wait their expected time.
 
         :return: the counted position (m)
-        :raises TargetRefused: before anything is sent
+        :raises TargetRefused: before anything is sent (check)
+        :raises NotHomed: before anything is sent: home() first
         :raises MoveStopped: cancelled: the stop character was sent
         """
-        target = check_target(target_m, self.max_length_m)
+        target = self.check(target_m)
+        if not self.homed:
+            raise NotHomed('the axis is not homed (after a connect or a stop): home it first')
         steps = round((target - self.position_m) / step1mm.STEP_M)
         if not steps:
             return self.position_m
@@ -345,6 +448,7 @@ class Step1mmStage:
         return start + (end - start) * done, (end - start) / duration if done < 1 else 0.0, False
 
     def stop(self):
-        """Send the stop character; return the counted position (what was sent, not done)."""
+        """Send the stop character; unhome; return the counted position (sent, not done)."""
+        self.homed = False
         self.line.write(self.mapping.command(0))
         return self.position_m

@@ -114,6 +114,7 @@ def test_step1mm_axis_follows_its_profile_and_stops_when_the_node_goes(tmp_path,
     axis = AxisClient(params(link, dialect='step1mm', baud=9600))
     try:
         assert wait_for(lambda: axis.snapshot()['connected'])
+        assert axis.home() == (True, 'zero is here')       # a step1mm axis too starts unhomed
         axis.set_target(0.01)
         assert wait_for(lambda: emu.state()['moving'])
         # The counted position follows the moves' expected profile, and says it is estimated.

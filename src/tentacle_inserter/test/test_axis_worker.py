@@ -1,11 +1,17 @@
-"""The axis worker against the gcode emulator: latest target, stop, estop, a lost line."""
+"""
+The axis worker: latest target, stop, estop, a lost line.
+
+Most tests run it against the gcode emulator on a pty; the outage tests turn its thread by
+hand (``_step``) on a scripted line, so the order of loss, target and reconnect is forced.
+"""
 
 import time
 
 import pytest
 from tentacle_common.serial_line import SerialLine
-from tentacle_inserter import stage
+from tentacle_inserter import stage, step1mm
 from tentacle_inserter.axis_worker import AxisWorker
+from tentacle_sim.scripted_line import Exchange, ScriptedLine
 from tentacle_sim.stage_emulator import GcodeStage
 
 SPEED, ACCEL = 0.01, 0.5
@@ -136,3 +142,60 @@ def test_the_status_says_what_holds_the_axis(worker, wait_for):
     assert wait_for(lambda: w.status() == ('warn', 'not homed: call home before moving'))
     w.set_enabled(False)
     assert w.status() == ('warn', 'disabled: motor off, targets refused')
+
+
+def step1mm_worker():
+    """Return (worker, line): a step1mm axis on a scripted line, connected and homed."""
+    line = ScriptedLine([Exchange(b'3')], baud=step1mm.BAUD)     # the stop at connect
+    w = AxisWorker(stage.Step1mmStage(line, max_length_m=0.05), reconnect_s=0.0)
+    w._step(0.0)
+    assert w.connected
+    w.home(timeout_s=0.0)        # asked for; the next turn does it
+    w._step(0.0)
+    assert w.snapshot()['homed']
+    return w, line
+
+
+def test_a_target_during_an_outage_is_refused_and_nothing_moves_after_it():
+    w, line = step1mm_worker()
+    line.close()                 # the adapter is unplugged: the next write finds out
+    w.set_target(0.002)
+    w._step(0.0)
+    assert not w.connected and w.error.startswith('line lost')
+    with pytest.raises(stage.TargetRefused, match='not connected: line lost'):
+        w.set_target(0.005)      # during the outage: refused, not kept
+    line.script.append(Exchange(b'3'))                          # back: a stop, no more
+    w._step(0.0)
+    assert w.connected and not w.snapshot()['homed']
+    w._step(0.0)                 # nothing is left to do: the script fails on any byte
+    with pytest.raises(stage.TargetRefused, match='not homed'):
+        w.set_target(0.005)      # a step1mm axis is unhomed by a connect, as gcode is
+    line.finish()
+    assert w.idle() and w.moves == 0 and w.refusals == 2
+
+
+def test_a_connect_drops_a_target_pending_from_before_it():
+    line = ScriptedLine([Exchange(b'3')], baud=step1mm.BAUD)
+    w = AxisWorker(stage.Step1mmStage(line, max_length_m=0.05), reconnect_s=0.0)
+    w._target = 0.003            # left by any path (before the fix: set_target in an outage)
+    w._step(0.0)
+    assert w.connected and w.idle()
+    line.finish()
+
+
+def test_a_device_that_never_answers_is_not_tried_again_and_not_stopped():
+    line = ScriptedLine([Exchange(b'G90\n')], baud=115200)        # a probe, and silence
+    axis = stage.GcodeStage(line, max_length_m=0.05, max_speed_m_s=SPEED, accel_m_s2=ACCEL,
+                            steps_per_mm=100.0, reply_timeout_s=0.2, restart_timeout_s=1.0)
+    w = AxisWorker(axis, reconnect_s=0.0)
+    w._step(0.0)
+    assert not w.connected and 'never answers' in w.gave_up
+    w.stop()
+    for _ in range(3):
+        w._step(0.0)             # no reconnect, no stop: the script fails on any byte
+    assert w.home(timeout_s=0.0)[0] is False
+    w._step(0.0)
+    assert w._home_result == (False, w.error)
+    w._close()
+    line.finish()
+    assert not w.stopped and w.status() == ('error', w.error)

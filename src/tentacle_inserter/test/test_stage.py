@@ -102,7 +102,10 @@ def test_a_lost_ok_is_retried_without_moving_twice(rig):
 def test_step1mm_counts_what_it_sent(rig):
     emu, axis = rig('step1mm')
     assert not axis.measured
-    assert axis.move_to(0.0032) == pytest.approx(0.003)       # whole millimetres
+    axis.home()
+    with pytest.raises(stage.TargetRefused, match='resolution'):
+        axis.move_to(0.0032)                                  # whole millimetres only
+    assert axis.move_to(0.003) == pytest.approx(0.003)
     time.sleep(3 * move_time_s(0.001, SPEED, 0.5) + 0.3)
     assert emu.state()['position_m'] == pytest.approx(0.003)
     assert axis.move_to(0.001) == pytest.approx(0.001)
@@ -111,3 +114,21 @@ def test_step1mm_counts_what_it_sent(rig):
     with pytest.raises(stage.TargetRefused):
         axis.move_to(float('nan'))
     assert [e['command'] for e in emu.log] == ['stop'] + ['extend'] * 3 + ['retract'] * 2
+
+
+def test_the_gcode_driver_on_a_step1mm_stage_moves_nothing(tmp_path):
+    link = str(tmp_path / 'stage')
+    emu = stage_emulator.Step1mmStage('e', link_path=link, speed_m_s=SPEED).start()
+    axis = stage.GcodeStage(SerialLine(link, 115200), max_length_m=0.05, max_speed_m_s=SPEED,
+                            accel_m_s2=ACCEL, steps_per_mm=STEPS_PER_MM, reply_timeout_s=0.2,
+                            restart_timeout_s=0.5)
+    try:
+        with pytest.raises(stage.NeverAnswered, match='step1mm'):
+            axis.connect()
+        with pytest.raises(stage.NeverAnswered):
+            axis.stop()
+    finally:
+        axis.line.close()
+        emu.stop()
+    assert emu.state()['position_m'] == 0.0 and not emu.state()['busy']
+    assert [bytes.fromhex(e['hex']) for e in emu.log] == [b'G', b'9', b'0', b'\n']

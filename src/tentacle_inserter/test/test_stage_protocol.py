@@ -13,7 +13,8 @@ from tentacle_sim.scripted_line import Exchange, ScriptedLine, ScriptError
 
 SPEED, ACCEL = 0.005, 0.5
 OK = b'ok\n'
-CONNECT = [Exchange(b'M400\n', OK),                       # nothing moves: no halt
+CONNECT = [Exchange(b'G90\n', OK),                        # the probe: a gcode firmware
+           Exchange(b'M400\n', OK),                       # nothing moves: no halt
            Exchange(b'G90\n', OK),
            Exchange(b'M92 E100.00000\n', OK),
            Exchange(b'M114\n', b'X:0.00 Y:0.00 Z:0.00 E:3.2100 Count X:0 Y:0 Z:0\n' + OK)]
@@ -39,8 +40,9 @@ def test_connect_reads_the_position_back_unhomed():
 
 
 def test_connect_to_a_firmware_still_moving_halts_it_first():
-    axis, line = gcode_axis([Exchange(b'M400\n'),            # busy: no ok in reply_timeout
-                             Exchange(b'M112\n'), Exchange(b'M999\n', OK)] + CONNECT[1:])
+    axis, line = gcode_axis(CONNECT[:1] + [
+        Exchange(b'M400\n'),                                # busy: no ok in reply_timeout
+        Exchange(b'M112\n'), Exchange(b'M999\n', OK)] + CONNECT[2:])
     assert axis.connect() == pytest.approx(0.00321)
     line.finish()
     assert not axis.homed
@@ -166,7 +168,8 @@ def test_step1mm_sends_a_character_a_millimetre_and_expects_nothing(mapping, ext
                         + [Exchange(b'3')], baud=step1mm.BAUD)
     axis = stage.Step1mmStage(line, max_length_m=0.05, mapping=mapping)
     axis.connect()                                        # a stop first
-    assert axis.move_to(0.0031) == pytest.approx(0.003)
+    axis.home()                                           # nothing on the wire
+    assert axis.move_to(0.003) == pytest.approx(0.003)
     assert axis.move_to(0.002) == pytest.approx(0.002)
     assert axis.stop() == pytest.approx(0.002)            # counted: what was sent
     line.finish()
@@ -179,8 +182,69 @@ def test_step1mm_waits_each_move_its_time_and_a_cancel_counts_where_it_got():
                         baud=step1mm.BAUD)
     axis = stage.Step1mmStage(line, max_length_m=0.05, speed_m_s=SPEED, accel_m_s2=ACCEL)
     axis.connect()
+    axis.home()
     t0 = line.now()
     with pytest.raises(stage.MoveStopped, match='stopped near 2.0 mm'):
         axis.move_to(0.004, cancelled=lambda: line.now() - t0 >= 2 * per_mm)
     line.finish()
     assert axis.position_m == pytest.approx(0.002, abs=0.0002)   # the profile's, counted
+
+
+def step1mm_firmware(mapping=step1mm.Mapping()):
+    """Return (responder, travel): a step1mm firmware on a scripted line, its travel in mm."""
+    travel = [0]
+
+    def responder(data):
+        for byte in data:
+            travel[0] += {mapping.extend: 1, mapping.retract: -1}.get(chr(byte), 0)
+        return b'', 0.0                                   # it never answers
+    return responder, travel
+
+
+@pytest.mark.parametrize('mapping', [step1mm.Mapping(), step1mm.EARLIER])
+def test_a_gcode_driver_on_a_step1mm_stage_sends_one_probe_and_nothing_more(mapping):
+    responder, travel = step1mm_firmware(mapping)
+    line = ScriptedLine(responder=responder, baud=115200)
+    axis = stage.GcodeStage(line, max_length_m=0.05, max_speed_m_s=SPEED, accel_m_s2=ACCEL,
+                            steps_per_mm=100.0, reply_timeout_s=0.2, restart_timeout_s=1.0)
+    with pytest.raises(stage.NeverAnswered, match='no gcode reply in 1 s to one probe'):
+        axis.connect()
+    assert line.now() == pytest.approx(1.0, abs=0.01)    # listened its time, at most
+    with pytest.raises(stage.NeverAnswered, match='M112 not sent; its state is unknown'):
+        axis.stop()                                       # a stop into the unknown: none
+    with pytest.raises(stage.NotHomed):
+        axis.move_to(0.001)
+    assert [data for _, data in line.sent] == [b'G90\n'] and travel == [0]
+
+
+def test_noise_is_no_answer_and_a_booting_board_is_waited_for():
+    axis, line = gcode_axis([Exchange(b'G90\n', b'\xfe\xfa\x00\x13\n')],
+                            restart_timeout_s=0.5)   # another baud: bytes, never a reply
+    with pytest.raises(stage.NeverAnswered):
+        axis.connect()
+    line.finish()
+    # A board that resets as its port opens loses the probe and says 'start' when it is up:
+    # that is an answer; its chatter is drained before the connect goes on.
+    axis, line = gcode_axis([Exchange(b'G90\n', b'start\necho:Marlin 2.1\n', after_s=0.8)]
+                            + CONNECT[1:], restart_timeout_s=2.0)
+    assert axis.connect() == pytest.approx(0.00321)
+    line.finish()
+
+
+def test_step1mm_moves_only_homed_and_in_whole_millimetres():
+    line = ScriptedLine([Exchange(b'3')], baud=step1mm.BAUD)
+    axis = stage.Step1mmStage(line, max_length_m=0.05)
+    axis.connect()
+    with pytest.raises(stage.NotHomed):
+        axis.move_to(0.002)                               # nothing sent: the script ended
+    axis.home()
+    for target in (0.0004, 0.0031):
+        with pytest.raises(stage.TargetRefused, match='steps of 1 mm .its resolution'):
+            axis.move_to(target)
+    assert axis.check(0.003 + 1e-12) == pytest.approx(0.003)   # float noise is on the mm
+    line.script += [Exchange(b'22'), Exchange(b'3')]
+    assert axis.move_to(0.002) == pytest.approx(0.002)
+    axis.stop()                                           # a stop unhomes, as gcode's does
+    with pytest.raises(stage.NotHomed):
+        axis.move_to(0.003)
+    line.finish()

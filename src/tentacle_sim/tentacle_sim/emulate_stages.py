@@ -17,7 +17,7 @@ import os
 import sys
 
 from tentacle_inserter import step1mm
-from tentacle_sim.emulator_control import serve_devices
+from tentacle_sim.emulator_control import line_rate, serve_devices
 from tentacle_sim.stage_emulator import GcodeStage, Step1mmStage
 
 MAPPINGS = {'later': step1mm.Mapping(), 'earlier': step1mm.EARLIER}
@@ -31,7 +31,7 @@ def build_parser():
     parser.add_argument('--axes', nargs='+', default=['inserter'], help='one port per axis')
     parser.add_argument('--dialects', nargs='+', choices=('gcode', 'step1mm'),
                         default=['gcode'], help='per axis (one for all, or one each)')
-    parser.add_argument('--baud', type=int, default=115200,
+    parser.add_argument('--baud', type=line_rate, default=115200,
                         help='gcode line rate, bit/s (step1mm runs at 9600)')
     parser.add_argument('--accel', type=float, default=0.5,
                         help="the firmware's acceleration, m/s^2")

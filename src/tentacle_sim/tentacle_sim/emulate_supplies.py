@@ -20,8 +20,8 @@ import os
 import sys
 
 from tentacle_sim.coil_load import CoilLoad
-from tentacle_sim.emulator_control import serve_devices
-from tentacle_sim.supply_emulator import EmulatedSupply
+from tentacle_sim.emulator_control import line_rate, serve_devices
+from tentacle_sim.supply_emulator import make_supply
 
 
 def build_parser():
@@ -29,7 +29,7 @@ def build_parser():
     parser = argparse.ArgumentParser(prog='supply_emulator',
                                      description=__doc__.strip().split('\n')[0])
     parser.add_argument('--dialect', choices=('dxkdp', 'scpi'), default='dxkdp')
-    parser.add_argument('--baud', type=int, default=9600, help='line rate, bit/s')
+    parser.add_argument('--baud', type=line_rate, default=9600, help='line rate, bit/s')
     parser.add_argument('--names', nargs='+', default=['x', 'y', 'z'])
     parser.add_argument('--addresses', nargs='+', type=int, default=None,
                         help='dxkdp bus address per supply (default 1 each)')
@@ -56,7 +56,7 @@ def main(args=None):
     supplies = {}
     for name, address in zip(opts.names, addresses):
         log_path = os.path.join(opts.log_dir, f'{name}.jsonl') if opts.log_dir else None
-        supplies[name] = EmulatedSupply(
+        supplies[name] = make_supply(
             name, opts.dialect, baud=opts.baud, address=address,
             link_path=os.path.join(opts.link_dir, f'coil_{name}'),
             polarity_mode=opts.polarity_mode, delay_s=opts.delay_s,

@@ -35,6 +35,12 @@ from tentacle_inserter.trapezoid import move_time_s, position_at
 from tentacle_sim.pty_device import PtyDevice
 
 
+def _check_baud(baud):
+    """Raise ValueError unless baud (bit/s) is positive: the line is paced by it."""
+    if not baud > 0:
+        raise ValueError(f'baud {baud!r}: a line rate must be positive (bit/s)')
+
+
 class _Axis:
     """The true axis: queued moves run in turn, trapezoidal, to whole steps (SI units)."""
 
@@ -99,7 +105,9 @@ class GcodeStage(PtyDevice):
         :param steps_per_mm: motor steps per mm until ``M92`` changes it
         :param reset_after_halt_s: after M112, restart by itself this long after (s); None:
             stay halted until M999
+        :raises ValueError: a baud that is not positive
         """
+        _check_baud(baud)
         super().__init__(name, baud=baud, link_path=link_path, delay_s=delay_s,
                          log_path=log_path)
         self.accel_m_s2 = accel_m_s2
@@ -261,7 +269,9 @@ class Step1mmStage(PtyDevice):
 
         :param mapping: the characters it obeys (step1mm.Mapping)
         :param speed_m_s: how fast each 1 mm move runs (m/s)
+        :raises ValueError: a baud that is not positive
         """
+        _check_baud(baud)
         super().__init__(name, baud=baud, link_path=link_path, delay_s=0.0, log_path=log_path)
         self.mapping, self.speed_m_s = mapping, speed_m_s
         self.axis = _Axis(accel_m_s2, 1e6)

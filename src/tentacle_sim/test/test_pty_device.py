@@ -2,13 +2,18 @@
 
 import json
 import os
+import pathlib
 import select
+import subprocess
+import sys
 import time
 import tty
 
 import pytest
 from tentacle_sim.pty_device import PtyDevice
-from tentacle_sim.supply_emulator import DxkdpSupply, EmulatedSupply, ScpiSupply
+from tentacle_sim.supply_emulator import DxkdpSupply, make_supply, ScpiSupply
+
+SRC = pathlib.Path(__file__).resolve().parents[2]
 
 
 class ShoutDevice(PtyDevice):
@@ -91,9 +96,25 @@ def test_a_disconnect_removes_the_port_and_it_comes_back(device):
 
 
 def test_one_device_model_per_dialect():
-    assert type(EmulatedSupply('x', 'dxkdp')) is DxkdpSupply
-    assert type(EmulatedSupply('x', 'scpi')) is ScpiSupply
+    assert type(make_supply('x', 'dxkdp')) is DxkdpSupply
+    assert type(make_supply('x', 'scpi', baud=115200)) is ScpiSupply
+    assert make_supply('x', 'scpi').dialect == 'scpi'
     with pytest.raises(ValueError, match="dialect 'modbus' is not dxkdp or scpi"):
-        EmulatedSupply('x', 'modbus')
+        make_supply('x', 'modbus')
+    with pytest.raises(ValueError, match='a line rate must be positive'):
+        make_supply('x', 'dxkdp', baud=0)
     with pytest.raises(ValueError, match="fault 'nak' is not one of"):
         PtyDevice('p').inject('nak')   # the bare line has no refusal
+
+
+def test_a_serial_number_is_the_same_in_every_run():
+    # Python salts str hashes per process: two processes with two seeds must still agree.
+    code = ('from tentacle_sim.supply_emulator import make_supply; '
+            "print(make_supply('x', 'scpi').serial)")
+    path = os.pathsep.join(str(SRC / p) for p in ('tentacle_sim', 'tentacle_coils',
+                                                  'tentacle_common'))
+    serials = {subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                              check=True, env={**os.environ, 'PYTHONHASHSEED': seed,
+                                               'PYTHONPATH': path}).stdout.strip()
+               for seed in ('1', '2')}
+    assert len(serials) == 1 and len(serials.pop()) == 5

@@ -7,7 +7,7 @@ import time
 import pytest
 
 from tentacle_coils import dxkdp, scpi
-from tentacle_sim.supply_emulator import EmulatedSupply
+from tentacle_sim.supply_emulator import make_supply
 
 
 def exchange(fd, request, reply_len=None, timeout_s=1.0):
@@ -29,7 +29,7 @@ def exchange(fd, request, reply_len=None, timeout_s=1.0):
 
 @pytest.fixture
 def open_port(on_pty, tmp_path):
-    return lambda dialect, **kwargs: on_pty(EmulatedSupply, 'x', dialect,
+    return lambda dialect, **kwargs: on_pty(make_supply, 'x', dialect,
                                             log_path=str(tmp_path / 'x.jsonl'), **kwargs)
 
 

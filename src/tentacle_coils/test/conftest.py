@@ -4,7 +4,7 @@ import time
 
 import pytest
 
-from tentacle_sim.supply_emulator import EmulatedSupply
+from tentacle_sim.supply_emulator import make_supply as emulated_supply
 
 
 @pytest.fixture
@@ -13,7 +13,7 @@ def emulate(tmp_path):
     started = []
 
     def make(dialect, names='xyz', **kwargs):
-        emus = [EmulatedSupply(n, dialect, link_path=str(tmp_path / f'coil_{n}'), **kwargs)
+        emus = [emulated_supply(n, dialect, link_path=str(tmp_path / f'coil_{n}'), **kwargs)
                 for n in names]
         started.extend(emus)
         return [emu.start() for emu in emus]

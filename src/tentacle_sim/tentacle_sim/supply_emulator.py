@@ -280,8 +280,3 @@ class ScpiSupply(SupplyModel):
         value = {'CURR?': self.load.setpoint_a, 'MEAS:CURR?': self.load.current_a(),
                  'MEAS:VOLT?': self.load.voltage_v()}[header]
         return meaning, scpi.format_value(value)
-
-
-# The factory's former name, for callers outside tentacle_sim not yet moved to make_supply
-# (tentacle_coils/test/conftest.py): a function, so it never picks a class in __new__.
-EmulatedSupply = make_supply

@@ -42,6 +42,7 @@ import rclpy  # noqa: E402
 from tentacle_coils.field_map import ActuationMap  # noqa: E402
 from tentacle_coils.params import REFERENCE_MATRIX_T_PER_A  # noqa: E402
 from tentacle_sim.sim_rig import CoilRig  # noqa: E402
+from tentacle_sim.waiting import wait_for  # noqa: E402
 
 HELD_A = np.array([15.0, -15.0, 15.0])
 BOUND_S = 1.5
@@ -54,16 +55,6 @@ def children(pid):
         with open(f'/proc/{pid}/task/{task}/children') as handle:
             pids += [int(p) for p in handle.read().split()]
     return pids
-
-
-def wait(predicate, timeout_s, period_s=0.001):
-    """Return True once predicate() holds, checking once more at the deadline."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(period_s)
-    return predicate()
 
 
 def one_run(node, kill_spare):
@@ -84,11 +75,12 @@ def one_run(node, kill_spare):
                 time.sleep(0.05)
 
         try:
-            if not wait(lambda: pub.get_subscription_count() and all(rig.emulators.outputs()),
-                        30.0, 0.05):
+            if not wait_for(lambda: pub.get_subscription_count() and all(
+                    rig.emulators.outputs()), 30.0, 0.05):
                 raise RuntimeError('coils_node did not come up:\n' + rig.node.output())
             threading.Thread(target=stream, daemon=True).start()
-            if not wait(lambda: np.allclose(rig.emulators.setpoints(), HELD_A, atol=0.01), 10):
+            if not wait_for(lambda: np.allclose(rig.emulators.setpoints(), HELD_A, atol=0.01),
+                            10.0):
                 raise RuntimeError(f'field not reached: {rig.emulators.setpoints()}')
             time.sleep(2.0)  # the spare has imported and waits for its config
             pids = children(rig.node.popen.pid)
@@ -97,8 +89,8 @@ def one_run(node, kill_spare):
             t_kill = time.monotonic()
             for pid in targets:
                 os.kill(pid, signal.SIGKILL)
-            ok = wait(lambda: rig.emulators.setpoints() == [0.0] * 3
-                      and not any(rig.emulators.outputs()), 15.0)
+            ok = wait_for(lambda: rig.emulators.setpoints() == [0.0] * 3
+                          and not any(rig.emulators.outputs()), 15.0, 0.001)
             elapsed = time.monotonic() - t_kill
             if not ok:
                 raise RuntimeError(f'not zero and off after 15 s:\n{rig.node.output()}')

@@ -12,7 +12,8 @@ import fcntl
 import os
 import pathlib
 import threading
-import time
+
+from tentacle_sim.waiting import wait_for  # noqa: F401 (the tests take it from here)
 
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
@@ -34,16 +35,6 @@ DOMAIN_ID, _DOMAIN_LOCK = _claim_domain()
 os.environ['ROS_DOMAIN_ID'] = str(DOMAIN_ID)
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ['PYTHONUNBUFFERED'] = '1'
-
-
-def wait_for(predicate, timeout_s=5.0, period_s=0.01):
-    """Return True as soon as predicate() is true, False after timeout_s."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(period_s)
-    return False
 
 
 class Spinner:

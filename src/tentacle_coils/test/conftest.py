@@ -1,9 +1,9 @@
 """Emulated supplies on real pseudo-terminals for the driver tests."""
 
-import time
+import functools
 
 import pytest
-
+from tentacle_sim import waiting
 from tentacle_sim.supply_emulator import make_supply as emulated_supply
 
 
@@ -23,17 +23,7 @@ def emulate(tmp_path):
         emu.stop()
 
 
-def _wait_for(predicate, timeout_s=3.0):
-    """Return True as soon as predicate() holds, False after timeout_s."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.005)
-    return False
-
-
 @pytest.fixture
 def wait_for():
     """Return a poller that waits until a predicate holds (3 s by default)."""
-    return _wait_for
+    return functools.partial(waiting.wait_for, timeout_s=3.0)

@@ -1,7 +1,5 @@
 """Emulated supplies on real pseudo-terminals for the driver tests."""
 
-import functools
-
 import pytest
 from tentacle_sim import waiting
 from tentacle_sim.supply_emulator import make_supply as emulated_supply
@@ -26,4 +24,4 @@ def emulate(tmp_path):
 @pytest.fixture
 def wait_for():
     """Return a poller that waits until a predicate holds (3 s by default)."""
-    return functools.partial(waiting.wait_for, timeout_s=3.0)
+    return lambda condition, timeout_s=3.0: waiting.wait_for(condition, timeout_s)

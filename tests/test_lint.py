@@ -50,3 +50,12 @@ def test_only_node_modules_import_ros(module):
     if module.name.endswith('_node.py'):
         return
     assert not ros, f'{module.relative_to(ROOT)} is pure logic but imports {sorted(ros)}'
+
+
+def test_test_modules_have_unique_names():
+    # The test folders are not packages: pytest imports each test module by its basename, so
+    # two of one name fail the whole collection (make test stops before the first test).
+    seen = {}
+    for path in sorted(ROOT.glob('src/*/test/test_*.py')) + sorted(ROOT.glob('tests/test_*.py')):
+        seen.setdefault(path.name, []).append(str(path.relative_to(ROOT)))
+    assert {name: paths for name, paths in seen.items() if len(paths) > 1} == {}

@@ -50,6 +50,7 @@ STREAM_HZ = 50.0
 JITTER_S = 2e-3
 SLEW_WINDOW_S = 0.1
 LOG_FORWARD_S = 0.05  # how late the node may stamp a line the bank process logged (s)
+COUNTERS = ('commands', 'updates', 'retries', 'timeouts')  # a supply's, in its diagnostics
 
 
 @dataclass
@@ -218,12 +219,84 @@ def wire_report(outcome, rig, t0, refused=None):
                                 f'{t_to - t0:+.3f} s): {away[:3]}')
 
 
+# -- evidence for a failure ---------------------------------------------------------------------
+def cpu_s(pid):
+    """Return a process's CPU time so far, user and system (s), from /proc; None if gone."""
+    try:
+        fields = pathlib.Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+    except (OSError, TypeError):
+        return None
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
+class Evidence:
+    """
+    Who sent, who received and who ran, between a scenario's start and a failure.
+
+    Taken at the start and again when something did not happen in time, it tells the bank
+    that sent nothing (its counters) from the emulator that logged nothing (its log) and from
+    nothing running at all (the processes' CPU time, and how late this process woke).
+    """
+
+    def __init__(self, rig, t0):
+        """Take the baseline: CPU time of node, bank and emulators; each supply's counters."""
+        self.rig, self.t0 = rig, t0
+        self.pids = {'node': rig.node.popen.pid, 'bank': bank_pid(rig.probe, t0 - 2.0),
+                     'emulators': rig.emulators.popen.pid}
+        self.cpu = self._cpu()
+        self.counters = self._counters(t0 - 2.0)
+
+    def _cpu(self):
+        return {name: cpu_s(pid) for name, pid in self.pids.items()}
+
+    def _counters(self, since):
+        out = {}
+        for axis in 'xyz':
+            status = self.rig.probe.supply_status(axis, since)
+            values = {kv.key: kv.value for kv in status.values} if status else {}
+            out[axis] = {k: int(values[k]) for k in COUNTERS if k in values}
+        return out
+
+    def report(self):
+        """Return what changed since the baseline, as text."""
+        now = time.monotonic()
+        cpu, counters = self._cpu(), self._counters(now - 1.5)
+        lines = [f'evidence over {now - self.t0:.2f} s since the fault was armed:',
+                 '  CPU time used: ' + ', '.join(
+                     f'{name} (pid {self.pids[name]}) '
+                     + (f'+{cpu[name] - self.cpu[name]:.2f} s' if None not in (
+                         cpu[name], self.cpu[name]) else 'gone')
+                     for name in self.pids)]
+        for axis in 'xyz':
+            received = self.rig.emulators.log(axis, self.t0)
+            sent = {k: counters[axis].get(k, 0) - self.counters[axis].get(k, 0)
+                    for k in counters[axis]}
+            last = received[-1]['t'] - self.t0 if received else None
+            lines.append(f'  {axis}: the bank counted {sent} (diagnostics, 1 Hz); the '
+                         f'emulator logged {len(received)} requests, the last at '
+                         + (f'{last:+.3f} s' if last is not None else '-')
+                         + f': {received[-3:]}')
+        return '\n'.join(lines)
+
+
+def dump_stacks(rig, t):
+    """Ask the bank and the node to print every thread's stack (SIGUSR1) to the node's log."""
+    for pid in (bank_pid(rig.probe, t), rig.node.popen.pid):
+        if pid is not None:
+            try:
+                os.kill(pid, signal.SIGUSR1)
+            except ProcessLookupError:
+                pass
+    time.sleep(0.5)
+
+
 # -- scenarios --------------------------------------------------------------------------------
 def transient(kind, **options):
     """Fault y for a few commands: retried, the stream keeps landing, no fault raised."""
     def run(rig, name):
         out = Outcome(name)
         t0 = time.monotonic()
+        evidence = Evidence(rig, t0)
         rig.emulators.fault('y', kind, **options)
         count = options.get('count', 1)
 
@@ -235,14 +308,13 @@ def transient(kind, **options):
             after = [e for e in log if e['t'] > faulted[-1]['t']]
             return (faulted, after) if after else None
 
-        if not wait_for(lambda: log_after_faults() is not None):
-            pid = bank_pid(rig.probe, t0)
-            if pid is not None:  # where each of the bank's threads waits, on the node's stderr
-                os.kill(pid, signal.SIGUSR1)
-                time.sleep(0.5)
+        waited = wait_for(lambda: log_after_faults() is not None)
+        if not waited:
+            report = evidence.report()
+            dump_stacks(rig, t0)
             raise RuntimeError(f'{name}: {count} faulted requests and one after them did not '
-                               f'reach y within 5 s; y received since the fault: '
-                               f'{rig.emulators.log("y", t0)[-8:]}\n{rig.node.output()[-12000:]}')
+                               f'reach y within 5 s ({waited!r})\n{report}\n'
+                               f'{rig.node.output()[-12000:]}')
         faulted, after = log_after_faults()
         t_first = faulted[0]['t']
         out.detect_s = next(e['t'] for e in rig.emulators.log('y', t0) if e['t'] > t_first) \
@@ -278,6 +350,11 @@ def persistent(kind, axis='y', **options):
         # LOG_FORWARD_S before the stamp, and never before the device is back.
         t_refused = max(t0 + (t_clear or 0.0) - LOG_FORWARD_S, t0 + options.get('duration_s', 0))
         wire_report(out, rig, t0, refused=(t_safe, t_refused))
+        if out.problems:  # the whole exchange around the recovery, and the node's side of it
+            out.problems.append(f'{axis} received from {t_safe - t0 - 0.1:+.3f} s: ' + '; '.join(
+                f"{e['t'] - t0:+.3f} {e.get('command', '?')} {e.get('current_a', '')}"
+                for e in rig.emulators.log(axis, t_safe - 0.1) if e['t'] <= t_refused + 0.2))
+            out.problems.append(rig.node.output()[-6000:])
         return out
     return run
 

@@ -9,6 +9,7 @@ one DiagnosticStatus per device with ``diagnostic_status``, starts rclpy with
 ``run_node`` does all of that for a node's ``main``.
 """
 
+import faulthandler
 import logging
 import os
 import signal
@@ -173,6 +174,9 @@ def run_node(argv, node_name, table, doc, make_node, stop_safely):
     except ConfigError as exc:
         print(f'{node_name}: not started: {exc}', file=sys.stderr)
         sys.exit(2)
+    # `kill -USR1 <pid>` prints every thread's stack to stderr without stopping the node, as
+    # the driver child processes do (rclpy takes SIGINT and SIGTERM only).
+    faulthandler.register(signal.SIGUSR1, all_threads=True)
     node = None
     try:
         node = make_node()

@@ -344,6 +344,8 @@ def persistent(kind, axis='y', **options):
         t_clear = timed_log(rig, 'fault cleared', t0, 8.0)
         out.check(t_clear is not None, 'the fault never cleared')
         out.recover_s = timed(rig.following, t0, 8.0)
+        out.check(out.safe_s is not None, 'the other axes did not reach zero')
+        out.check(out.recover_s is not None, 'the stream did not land again')
         # Commands are refused until the bank clears the fault, which it logs first; but the
         # node stamps that line when it reads it from the bank process, a few ms (more under
         # load) after the first sets may already have landed. So the refused window ends
@@ -374,6 +376,9 @@ def estop_storm(rig, name):
     t_release = time.monotonic()
     rig.probe.estop(False)
     out.recover_s = timed(rig.following, t0, 8.0)
+    out.check(out.detect_s is not None, 'the node never logged the estop')
+    out.check(out.safe_s is not None, 'not zero and off under the estop')
+    out.check(out.recover_s is not None, 'the stream did not land again after the release')
     wire_report(out, rig, t0, refused=(t_safe, t_release))
     return out
 
@@ -412,7 +417,9 @@ def kill_bank(rig, name):
     t_enable = time.monotonic()
     out.check(rig.probe.enable(True).success, '/coils/enable refused after the bank died')
     out.recover_s = timed(rig.following, t0, 8.0)
-    out.check(out.safe_s is not None and out.safe_s < 1.0, 'not zero and off within 1 s')
+    # How soon is bench/coils_failover.py's figure: here, that it happens at all.
+    out.check(out.safe_s is not None, 'not zero and off')
+    out.check(out.recover_s is not None, 'the stream did not land again after /coils/enable')
     wire_report(out, rig, t0, refused=(t_safe, t_enable))
     return out
 
@@ -480,8 +487,8 @@ def scpi_lost_set(rig, name):
     out.safe_s = out.recover_s = timed(
         lambda: rig.emulators.setpoints()[0] == final_a, t0, 3.0)
     rig.stream.running.set()
-    out.check(out.detect_s is not None and out.detect_s < 1.6,
-              'not found within the 1 s verify period (plus the ramp)')
+    # The verify period is 1 s: found within 3 s (how soon is in the table, not a check).
+    out.check(out.detect_s is not None, 'the lost set was not found by read-back')
     wire_report(out, rig, t0)
     return out
 
@@ -494,6 +501,8 @@ def scpi_error_queue(rig, name):
     out.detect_s = timed_log(rig, '-300', t0, 3.0)
     out.safe_s = 0.0
     out.recover_s = timed(rig.following, t0)
+    out.check(out.detect_s is not None, 'the queued error was never reported')
+    out.check(out.recover_s is not None, 'the stream did not land again')
     wire_report(out, rig, t0)
     return out
 

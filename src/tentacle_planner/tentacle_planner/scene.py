@@ -48,7 +48,7 @@ from tentacle_model import statics
 from tentacle_model.chain import discretise
 from tentacle_model.model import TentacleModel
 from tentacle_model.tentacle_spec import load_tentacle, SpecError, TentacleSpec
-from tentacle_model.user_files import FieldReader, read_capped
+from tentacle_model.user_files import FieldReader, load_yaml, read_capped
 from tentacle_planner import paths
 from tentacle_planner.errors import PlanInputError
 import yaml
@@ -186,8 +186,8 @@ def load_scene(path):
 
     :param path: the scene YAML file
     :return: a Scene
-    :raises PlanInputError: an unreadable, oversized, empty or malformed file, a key unknown,
-        missing, of the wrong type or out of range, or a tentacle or path file that is;
+    :raises PlanInputError: an unreadable, oversized, empty or malformed file (a key given
+        twice is malformed), a key unknown, missing, of the wrong type or out of range, or a tentacle or path file that is;
         the message names the file and the key (and the point of a path)
     """
     source = pathlib.Path(path)
@@ -199,8 +199,8 @@ def load_scene(path):
         raise PlanInputError(f'{source}: not UTF-8 text ({exc.reason} at byte {exc.start})') \
             from None
     try:
-        document = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
+        document = load_yaml(text)
+    except yaml.YAMLError as exc:  # a repeated key too
         raise PlanInputError(f'{source}: not valid YAML: {exc}') from None
     except RecursionError:
         raise PlanInputError(f'{source}: not valid YAML: nested too deeply') from None

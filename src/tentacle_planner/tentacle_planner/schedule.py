@@ -13,6 +13,9 @@ figures and the flags. ``plot_plan`` draws DIR/plan.png. Shape errors are the pr
 import pathlib
 
 import numpy as np
+from tentacle_model.tentacle_spec import MAX_FILE_BYTES as MAX_TENTACLE_BYTES
+from tentacle_model.user_files import load_yaml, read_capped
+from tentacle_planner.errors import PlanInputError
 from tentacle_planner.planner import magnetisation_angles_deg, shape_rms, step_clearance
 import yaml
 
@@ -25,7 +28,10 @@ def _floats(array, digits=9):
 
 def planned_tentacle(result):
     """Return the tentacle file's document with the planned magnetisation directions."""
-    document = yaml.safe_load(pathlib.Path(result.scene.tentacle_file).read_text())
+    # The file the scene was validated from, read as strictly again (tentacle_spec).
+    data = read_capped(result.scene.tentacle_file, MAX_TENTACLE_BYTES, PlanInputError,
+                       'a tentacle file')
+    document = load_yaml(data.decode('utf-8'))
     for segment, direction in zip(document['segments'], result.plan.directions):
         if segment.get('magnetisation') and np.any(direction):
             segment['magnetisation']['direction'] = [round(float(v), 9) for v in direction]

@@ -486,23 +486,25 @@ def optimise(problem, *, seed=0, starts=8, iterations=100, initial=None, progres
     # gives the same plan): a million starts take no memory before the first is fitted.
     total = len(candidates) + starts
     candidates = itertools.chain(candidates, (random_start() for _ in range(starts)))
-    best, best_key = None, None
-    for index, x0 in enumerate(candidates):
-        try:
+    best, best_key, x0 = None, None, None
+    try:  # all of the loop: Ctrl-C may land between two fits too
+        for index, x0 in enumerate(candidates):
             if balance is not None:
                 x0 = fit(balance, x0, iterations)
             plan = problem.plan(fit(problem, x0, iterations))
-        except KeyboardInterrupt:
-            # Ctrl-C keeps the best plan so far (or the start itself, if none is done).
-            fallback = best or problem.plan(np.clip(x0, *_limits(problem)))
-            return replace(fallback, interrupted=True,
-                           flags=fallback.flags + ['interrupted: the best plan so far'])
-        # A plan that relies on no unstable step and breaks no limit beats any that does.
-        key = (len(plan.flags), plan.objective)
-        if best_key is None or key < best_key:
-            best, best_key = plan, key
-        if progress is not None:
-            progress(index + 1, total, best.objective)
+            # A plan that relies on no unstable step and breaks no limit beats any that does.
+            key = (len(plan.flags), plan.objective)
+            if best_key is None or key < best_key:
+                best, best_key = plan, key
+            if progress is not None:
+                progress(index + 1, total, best.objective)
+    except KeyboardInterrupt:
+        # Ctrl-C keeps the best plan so far (or the start itself, if none is done).
+        if best is None and x0 is None:
+            raise
+        fallback = best or problem.plan(np.clip(x0, *_limits(problem)))
+        return replace(fallback, interrupted=True,
+                       flags=fallback.flags + ['interrupted: the best plan so far'])
     return best
 
 

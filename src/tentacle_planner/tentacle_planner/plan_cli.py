@@ -167,6 +167,7 @@ def main(args=None):
     if problem:
         print(f'tentacle-plan: --out {problem}', file=sys.stderr)
         return 2
+    result = None
     try:
         scene = _scene(opts)
         result = plan_scene(scene, seed=opts.seed, starts=opts.starts,
@@ -174,14 +175,15 @@ def main(args=None):
                             tip_driven=opts.baseline == 'tip-driven', robust=opts.robust,
                             progress=_progress,
                             first_stage=opts.first_stage == 'torque-balance')
+        return _write(opts.out, result)
     except PlanInputError as exc:
         print(f'tentacle-plan: {exc}', file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f'\ntentacle-plan: interrupted before a plan was found: nothing written '
-              f'(what {opts.out} held is as it was)', file=sys.stderr)
+        when = 'before a plan was found' if result is None else 'before the plan was written'
+        print(f'\ntentacle-plan: interrupted {when}: nothing written (what {opts.out} held '
+              'is as it was)', file=sys.stderr)
         return INTERRUPTED
-    return _write(opts.out, result)
 
 
 def _write(out, result):

@@ -163,15 +163,26 @@ def plan_scene(scene, *, seed=0, starts=8, iterations=100, tip_driven=False, rob
     """
     problem = problem_of(scene, tip_driven)
 
-    def error(step):
-        return scene.shape_error(step)[0]
-
     def report_progress(stage):
         return None if progress is None else (
             lambda done, total, best: progress(stage, done, total, best))
 
     nominal = optimise(problem, seed=seed, starts=starts, iterations=iterations,
                        progress=report_progress('plan'), first_stage=first_stage)
+    try:
+        return _after_search(scene, problem, nominal, seed, iterations, robust,
+                             report_progress)
+    except KeyboardInterrupt:  # between two phases: the plan alone
+        return SceneResult(scene, nominal, nominal, None, [], [], [], [],
+                           list(nominal.flags) + ['interrupted: left out everything after '
+                                                  'the search'], True)
+
+
+def _after_search(scene, problem, nominal, seed, iterations, robust, report_progress):
+    """Return plan_scene's SceneResult from the nominal plan: the phases after the search."""
+    def error(step):
+        return scene.shape_error(step)[0]
+
     interrupted = nominal.interrupted
     skipped = []
 

@@ -33,18 +33,18 @@ def fifo(folder, data=b'name: from a pipe\nsegments: []\n'):
     path = folder / 'pipe.yaml'
     os.mkfifo(path)
 
-    def write():
+    def write():  # to every reader that comes, for a while: a reader may come twice
         time.sleep(UNBLOCK_AFTER_S)
-        deadline = time.monotonic() + 10.0
+        deadline = time.monotonic() + 30.0
         while time.monotonic() < deadline:
-            try:  # only succeeds while a reader has it open
+            try:  # succeeds only while a reader has it open
                 fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK)
             except OSError:
-                time.sleep(0.1)
+                time.sleep(0.05)
                 continue
             os.write(fd, data)
             os.close(fd)
-            return
+            time.sleep(0.05)
 
     threading.Thread(target=write, daemon=True).start()
     return path

@@ -60,18 +60,18 @@ def fifo(folder, name):
     path = folder / name
     os.mkfifo(path)
 
-    def write():
+    def write():  # to every reader that comes, for a while: a reader may come twice
         time.sleep(UNBLOCK_AFTER_S)
-        deadline = time.monotonic() + 10.0
+        deadline = time.monotonic() + 30.0
         while time.monotonic() < deadline:
             try:  # succeeds only while a reader has it open
                 fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK)
             except OSError:
-                time.sleep(0.1)
+                time.sleep(0.05)
                 continue
             os.write(fd, b'x_m,y_m,z_m\n0,0,0\n0.06,0,0\n')
             os.close(fd)
-            return
+            time.sleep(0.05)
 
     threading.Thread(target=write, daemon=True).start()
     return path
@@ -94,6 +94,8 @@ def run(args, capsys):
         code = plan_cli.main([str(a) for a in args])
     except SystemExit as exit_:  # argparse
         code = exit_.code
+    except KeyboardInterrupt:  # would end the whole pytest session, not fail this test
+        pytest.fail('KeyboardInterrupt escaped tentacle-plan: a traceback, not exit 130')
     printed = capsys.readouterr()
     return code, printed.out, printed.err, time.monotonic() - started
 

@@ -26,9 +26,6 @@ import sys
 import tempfile
 
 from tentacle_planner.errors import PlanInputError
-from tentacle_planner.planner import plan_scene
-from tentacle_planner.scene import load_scene, scene_of
-from tentacle_planner.schedule import OUTPUTS, summary, write_plot, write_schedule_file
 
 MAX_STARTS = 10_000       # random starts: each is a fit of its own (seconds)
 MAX_ITERATIONS = 100_000  # model evaluations per start
@@ -105,6 +102,7 @@ def _lengths(text):
 
 def _scene(opts):
     """Return the Scene of the options: a scene file, or a tentacle and a path file."""
+    from tentacle_planner.scene import load_scene, scene_of
     if opts.scene:
         return load_scene(opts.scene)
     coil = {'max_field_t': opts.max_field, 'max_total_field_t': opts.max_total_field,
@@ -125,9 +123,9 @@ def _progress(stage, done, total, best):
           file=sys.stderr, flush=True)
 
 
-def output_problem(out):
+def output_problem(out, names):
     """
-    Return why the folder out cannot take a run's outputs, or None.
+    Return why the folder out cannot take a run's outputs (files named names), or None.
 
     Tried, not guessed (permissions say little to root, or under /proc): a file is made and
     removed in the folder, or in its nearest existing parent when it is still to be made.
@@ -135,7 +133,7 @@ def output_problem(out):
     path = pathlib.Path(out).absolute()
     if path.exists() and not path.is_dir():
         return f'{out} exists and is not a folder'
-    for name in OUTPUTS:
+    for name in names:
         if (path / name).exists() and not (path / name).is_file():
             return f'{path / name} exists and is not a file'
     existing = path
@@ -163,12 +161,16 @@ def main(args=None):
                      '--tentacle and --path with the limits as options')
     if not opts.scene and not (opts.tentacle and opts.path):
         parser.error('give --scene FILE, or --tentacle FILE and --path FILE')
-    problem = output_problem(opts.out)
-    if problem:
-        print(f'tentacle-plan: --out {problem}', file=sys.stderr)
-        return 2
     result = None
     try:
+        # Imported here, where Ctrl-C is handled: numpy, scipy, numba and matplotlib take
+        # most of the first second.
+        from tentacle_planner.planner import plan_scene
+        from tentacle_planner.schedule import OUTPUTS
+        problem = output_problem(opts.out, OUTPUTS)
+        if problem:
+            print(f'tentacle-plan: --out {problem}', file=sys.stderr)
+            return 2
         scene = _scene(opts)
         result = plan_scene(scene, seed=opts.seed, starts=opts.starts,
                             iterations=opts.iterations,
@@ -188,6 +190,7 @@ def main(args=None):
 
 def _write(out, result):
     """Write the outputs and the summary; return the exit code."""
+    from tentacle_planner.schedule import summary, write_plot, write_schedule_file
     written, interrupted = [], result.interrupted
     try:
         written.append(write_schedule_file(out, result))

@@ -198,7 +198,7 @@ def csv_arc(folder):
 @pytest.mark.parametrize('what, arguments, code, message', CASES, ids=[c[0] for c in CASES])
 def test_bad_input_is_refused_at_once_naming_file_key_and_value(
         tmp_path, capsys, monkeypatch, what, arguments, code, message):
-    monkeypatch.setattr(plan_cli, 'plan_scene', refuse_to_plan)
+    monkeypatch.setattr(planner, 'plan_scene', refuse_to_plan)
     got, out, err, elapsed_s = run(arguments(tmp_path), capsys)
     assert (got, bool(re.search(message, err))) == (code, True), err
     assert 'Traceback' not in err and len(err) < 2000
@@ -317,6 +317,29 @@ def test_ctrl_c_in_every_phase_exits_130_with_the_best_plan_so_far(
     assert (out / 'plan.png').read_bytes().startswith(b'\x89PNG')
     assert f'FLAG: {flag}' in printed and '[INTERRUPTED: best plan so far]' in printed
     assert not list(out.glob('.*.tmp'))
+
+
+class InterruptedImport:
+    """A module finder that is Ctrl-C'd when it is asked for one module."""
+
+    def __init__(self, name):
+        """Interrupt the import of the module name."""
+        self.name = name
+
+    def find_spec(self, name, path=None, target=None):
+        """Raise KeyboardInterrupt for the module; leave every other to the next finder."""
+        if name == self.name:
+            raise KeyboardInterrupt
+        return None
+
+
+def test_ctrl_c_while_the_libraries_load_exits_130(tmp_path, capsys, monkeypatch):
+    # numpy, scipy, numba and matplotlib take most of the first second of a run.
+    monkeypatch.delitem(sys.modules, 'tentacle_planner.planner')
+    monkeypatch.setattr(sys, 'meta_path', [InterruptedImport('tentacle_planner.planner'),
+                                           *sys.meta_path])
+    code, _, err, _ = run(['--scene', arc_scene(tmp_path), '--out', tmp_path / 'o'], capsys)
+    assert code == 130 and 'interrupted before a plan was found: nothing written' in err
 
 
 def test_ctrl_c_while_drawing_keeps_the_schedule_and_no_stale_picture(

@@ -119,8 +119,18 @@ def _progress(stage, done, total, best):
     """Draw a progress bar on stderr: starts (with the best objective) or steps (best None)."""
     bar = '#' * round(20 * done / max(total, 1))
     what = 'steps' if best is None else f'starts, best objective {best:.3g}'
+    _progress.open = done < total  # a line still to be ended (_say)
     print(f'\r{stage}: [{bar:<20}] {done}/{total} {what}', end='' if done < total else '\n',
           file=sys.stderr, flush=True)
+
+
+_progress.open = False
+
+
+def _say(message):
+    """Print a message to stderr, on a line of its own after a progress bar."""
+    print(('\n' if _progress.open else '') + f'tentacle-plan: {message}', file=sys.stderr)
+    _progress.open = False
 
 
 def output_problem(out, names):
@@ -169,7 +179,7 @@ def main(args=None):
         from tentacle_planner.schedule import OUTPUTS
         problem = output_problem(opts.out, OUTPUTS)
         if problem:
-            print(f'tentacle-plan: --out {problem}', file=sys.stderr)
+            _say(f'--out {problem}')
             return 2
         scene = _scene(opts)
         result = plan_scene(scene, seed=opts.seed, starts=opts.starts,
@@ -179,12 +189,11 @@ def main(args=None):
                             first_stage=opts.first_stage == 'torque-balance')
         return _write(opts.out, result)
     except PlanInputError as exc:
-        print(f'tentacle-plan: {exc}', file=sys.stderr)
+        _say(exc)
         return 2
     except KeyboardInterrupt:
         when = 'before a plan was found' if result is None else 'before the plan was written'
-        print(f'\ntentacle-plan: interrupted {when}: nothing written (what {opts.out} held '
-              'is as it was)', file=sys.stderr)
+        _say(f'interrupted {when}: nothing written (what {opts.out} held is as it was)')
         return INTERRUPTED
 
 
@@ -199,23 +208,20 @@ def _write(out, result):
     except KeyboardInterrupt:
         interrupted = True
     except OSError as exc:  # the folder was checked before planning; it changed since
-        print(f'tentacle-plan: {out}: cannot write ({exc.strerror}); written: '
-              f'{", ".join(map(str, written)) or "nothing"}', file=sys.stderr)
+        _say(f'{out}: cannot write ({exc.strerror}); written: '
+             f'{", ".join(map(str, written)) or "nothing"}')
         return 2
     if written:
         print(f'wrote {" and ".join(map(str, written))}')
     if not interrupted:
         return 3 if result.flags else 0
     if not written:
-        print('\ntentacle-plan: interrupted while writing the schedule: nothing written',
-              file=sys.stderr)
+        _say('interrupted while writing the schedule: nothing written')
     elif len(written) == 1:
-        print(f'\ntentacle-plan: interrupted: wrote {written[0]}'
-              + (' (the best plan so far)' if result.interrupted else '')
-              + ', not the picture', file=sys.stderr)
+        _say(f'interrupted: wrote {written[0]}'
+             + (' (the best plan so far)' if result.interrupted else '') + ', not the picture')
     else:
-        print('tentacle-plan: interrupted: wrote the best plan so far (its flags say what '
-              'was left out)', file=sys.stderr)
+        _say('interrupted: wrote the best plan so far (its flags say what was left out)')
     return INTERRUPTED
 
 

@@ -217,11 +217,11 @@ def _write(out, result):
         return 3 if result.flags else 0
     if not written:
         _say('interrupted while writing the schedule: nothing written')
-    elif len(written) == 1:
-        _say(f'interrupted: wrote {written[0]}'
-             + (' (the best plan so far)' if result.interrupted else '') + ', not the picture')
-    else:
-        _say('interrupted: wrote the best plan so far (its flags say what was left out)')
+        return INTERRUPTED
+    what = 'the best plan so far' if result.interrupted else 'the plan'
+    _say(f'interrupted: wrote {what} to {written[0]}'
+         + (' and its picture' if len(written) == 2 else ', not its picture')
+         + (' (its flags say what was left out)' if result.interrupted else ''))
     return INTERRUPTED
 
 

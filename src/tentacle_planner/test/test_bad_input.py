@@ -348,7 +348,8 @@ def test_ctrl_c_while_drawing_keeps_the_schedule_and_no_stale_picture(
     previous_run(out)
     monkeypatch.setattr(schedule, *interrupt(schedule, 'plot_plan'))
     code, _, err, _ = run(['--scene', arc_scene(tmp_path), '--out', out, *QUICK], capsys)
-    assert code == 130 and 'interrupted: wrote ' in err and 'not the picture' in err
+    assert code == 130 and 'interrupted: wrote the plan to ' in err
+    assert 'schedule.yaml, not its picture' in err
     assert yaml.safe_load((out / 'schedule.yaml').read_text())['format'] == schedule.FORMAT
     assert not (out / 'plan.png').exists()  # the previous run's is gone, not beside this one
     assert sorted(p.name for p in out.iterdir()) == ['schedule.yaml']

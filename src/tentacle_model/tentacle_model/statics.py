@@ -34,6 +34,13 @@ from threadpoolctl import ThreadpoolController
 
 MAX_STEP_RAD = 0.5       # largest change of any angle in one Newton step
 MAX_SADDLE_ESCAPES = 5
+SMALL_ANGLE_LIMIT_RAD = 0.3
+"""
+The largest link angle from the insertion direction the small-angle model is answered for.
+
+At 0.3 rad sin x = x within 1.5 % and cos x = 1 within 4.5 %; the linearised kinematics
+lengthen such a link by 4.4 % (sqrt(1 + x^2)). Past it small_angle_violation says so.
+"""
 ESCAPE_STEP_RAD = 0.05
 # Dense Hessians of these sizes are factorised on one BLAS thread: measured here, with the
 # other core busy a 150 x 150 Cholesky took 0.12 ms on one thread and 0.8 ms on two (the
@@ -504,6 +511,34 @@ def _solve(problem, x, shape, tol, max_iterations, time_limit_s, deadline):
     angles, points = problem.result(x)
     return Equilibrium(angles, points, reason.startswith('converged'), reason, iterations,
                        residual, stability, float(problem.energy(x)))
+
+
+def small_angle_violation(eq, length_m, limit_rad=SMALL_ANGLE_LIMIT_RAD):
+    """
+    Return why a small-angle (linear) Equilibrium is outside the model's range, or None.
+
+    Outside: a link turned more than limit_rad from the insertion direction (planar: its
+    absolute angle; 3-DoF: the sum of the joint angles up to it, as the linearised
+    kinematics add them). The linear solve still converges there, but its answer is not
+    the rod's: the linearised kinematics stretch a link by sqrt(1 + angle^2), so far out
+    the tip lies further from the base than the rod is long.
+
+    :param eq: an Equilibrium of solve(..., linear=True)
+    :param length_m: the inserted length of the rod, m (for the message)
+    """
+    angles = np.asarray(eq.angles_rad, dtype=float)
+    if not len(angles) or not np.all(np.isfinite(angles)):
+        return None  # nothing inserted, or no minimum (its reason says so already)
+    link = np.abs(angles) if angles.ndim == 1 else np.linalg.norm(
+        np.cumsum(angles, axis=0), axis=1)
+    worst = int(np.argmax(link))
+    if link[worst] <= limit_rad:
+        return None
+    reach = float(np.linalg.norm(eq.points_m[-1] - eq.points_m[0]))
+    return (f"outside the small-angle model's range: link {worst + 1} is turned "
+            f'{link[worst]:.3g} rad from the insertion direction, more than the {limit_rad:g} '
+            f'rad the model holds for (its tip is {reach * 1e3:.4g} mm from the base of a '
+            f'{length_m * 1e3:.4g} mm rod): use the full model')
 
 
 def solve_planar(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), **options):

@@ -6,7 +6,10 @@ tentacle-statics: the equilibrium of a tentacle in a uniform field, for what-ifs
 Prints the centreline, the tip position and heading, the stability (smallest Hessian
 eigenvalue) and whether the solve converged. Exit code 0 when converged, 3 when not (the
 result is still printed), 2 for bad input, including a problem beyond the size limits
-(statics.MAX_LINKS, statics.MAX_ESTIMATED_BYTES, tentacle_spec.MAX_FILE_BYTES).
+(statics.MAX_LINKS, statics.MAX_ESTIMATED_BYTES, tentacle_spec.MAX_FILE_BYTES). With
+``--linear`` an answer with a link turned more than statics.SMALL_ANGLE_LIMIT_RAD from the
+insertion direction is outside the small-angle model's range: printed, said so, not
+converged, exit code 3.
 """
 
 import argparse
@@ -16,7 +19,7 @@ import sys
 
 import numpy as np
 from tentacle_model.chain import discretise
-from tentacle_model.statics import solve
+from tentacle_model.statics import small_angle_violation, solve
 from tentacle_model.tentacle_spec import load_tentacle, SpecError
 
 # Any float, as float() reads it. argparse takes an argument for an option unless it matches
@@ -63,12 +66,16 @@ def main(args=None):
     except (SpecError, ValueError) as exc:
         print(f'tentacle-statics: {exc}', file=sys.stderr)
         return 2
+    converged, reason = eq.converged, eq.reason
+    outside = small_angle_violation(eq, float(chain.lengths_m.sum())) if opts.linear else None
+    if outside and converged:  # the linear solve is exact, the model no longer is
+        converged, reason = False, outside
     result = {
         'tentacle': spec.name, 'field_t': list(opts.field), 'inserted_m': float(
             chain.lengths_m.sum()), 'links': chain.size, 'dof': opts.dof,
         'dipoles': opts.dipoles, 'linear': opts.linear, 'backbone_m': opts.backbone,
         'tip': eq.tip_m.tolist(), 'heading': eq.heading.tolist(),
-        'converged': eq.converged, 'reason': eq.reason, 'iterations': eq.iterations,
+        'converged': converged, 'reason': reason, 'iterations': eq.iterations,
         'residual': eq.residual,
         'stability': eq.stability if np.isfinite(eq.stability) else None,
         'energy_j': eq.energy_j, 'points': eq.points_m.tolist()}
@@ -82,11 +89,11 @@ def main(args=None):
             print(f'  {p[0] * 1e3:9.4f} {p[1] * 1e3:9.4f} {p[2] * 1e3:9.4f}')
         print(f'tip (mm): {np.round(eq.tip_m * 1e3, 4).tolist()}   heading: '
               f'{np.round(eq.heading, 4).tolist()}')
-        print(f'{"converged" if eq.converged else "NOT CONVERGED"}: {eq.reason} '
-              f'({eq.iterations} iterations, residual {eq.residual:.2e})')
+        state = 'NOT VALID' if outside else 'converged' if converged else 'NOT CONVERGED'
+        print(f'{state}: {reason} ({eq.iterations} iterations, residual {eq.residual:.2e})')
         print(f'stability (smallest Hessian eigenvalue): {eq.stability:.4g} N m/rad^2'
               + ('  UNSTABLE' if eq.stability < 0 else ''))
-    return 0 if eq.converged else 3
+    return 0 if converged else 3
 
 
 if __name__ == '__main__':

@@ -30,7 +30,7 @@ import math
 import pathlib
 
 import numpy as np
-from tentacle_model.user_files import FieldReader, read_capped
+from tentacle_model.user_files import FieldReader, load_yaml, read_capped
 import yaml
 
 MU0 = 4e-7 * math.pi  # vacuum permeability, T m / A
@@ -179,8 +179,8 @@ def load_tentacle(path):
     """
     Read and validate a tentacle YAML file.
 
-    :raises SpecError: unreadable, larger than MAX_FILE_BYTES, not UTF-8 text, not YAML, or
-        a field that is missing, unknown or invalid
+    :raises SpecError: unreadable, not a regular file, larger than MAX_FILE_BYTES, not UTF-8
+        text, not YAML, a key given twice, or a field that is missing, unknown or invalid
     """
     data = read_capped(path, MAX_FILE_BYTES, SpecError, 'a tentacle file')
     try:
@@ -188,8 +188,8 @@ def load_tentacle(path):
     except UnicodeDecodeError as exc:
         raise SpecError(f'{path}: not UTF-8 text ({exc.reason} at byte {exc.start})') from None
     try:
-        document = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
+        document = load_yaml(text)
+    except yaml.YAMLError as exc:  # a repeated key too
         raise SpecError(f'{path}: not valid YAML: {exc}') from None
     except RecursionError:  # PyYAML's composer recurses once per level of nesting
         raise SpecError(f'{path}: not valid YAML: nested too deeply') from None

@@ -1,14 +1,24 @@
 """
 Reading the files people write (tentacle files, scenes, paths): capped, and every refusal named.
 
-``read_capped`` reads no more than a limit (a device or a huge file is refused at once, not
-read for minutes); ``FieldReader`` gives typed access to a parsed YAML document and refuses
-a value with the file and the path of the key in the message, raising the caller's error.
+``read_capped`` reads a regular file of no more than a limit (a FIFO, a device or a
+directory is refused before a byte is read, a huge file at once, not read for minutes);
+``load_yaml`` parses YAML strictly (a key given twice is refused, naming it and its line,
+where PyYAML would keep the last silently); ``FieldReader`` gives typed access to a parsed
+YAML document and refuses a value with the file and the path of the key in the message,
+raising the caller's error.
 """
 
 import math
+import os
+import stat
 
 import numpy as np
+import yaml
+
+_KINDS = ((stat.S_ISDIR, 'a directory'), (stat.S_ISFIFO, 'a FIFO (named pipe)'),
+          (stat.S_ISCHR, 'a character device'), (stat.S_ISBLK, 'a block device'),
+          (stat.S_ISSOCK, 'a socket'))
 
 
 def read_capped(path, limit_bytes, error, what):
@@ -17,17 +27,65 @@ def read_capped(path, limit_bytes, error, what):
 
     :param error: the exception class to raise (message: the path, then the reason)
     :param what: what kind of file, for the message ('a tentacle file')
+    :raises error: a file that cannot be opened, is not a regular file (a FIFO would block
+        until a writer comes, a device never ends), or is larger than limit_bytes
     """
     try:
-        with open(path, 'rb') as file:
+        # Non-blocking: opening a FIFO for reading otherwise waits for a writer, forever.
+        # The kind is taken from the open descriptor, so nothing can swap the file between.
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    except OSError as exc:
+        raise error(f'{path}: {exc.strerror}') from None
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            kind = next((name for test, name in _KINDS if test(mode)), 'not a regular file')
+            raise error(f'{path}: {kind}, not a regular file: give {what} saved on disk')
+        with os.fdopen(fd, 'rb', closefd=False) as file:
             data = file.read(limit_bytes + 1)
     except OSError as exc:
         raise error(f'{path}: {exc.strerror}') from None
+    finally:
+        os.close(fd)
     if len(data) > limit_bytes:
         size = f'{limit_bytes // 2 ** 20} MiB' if limit_bytes >= 2 ** 20 else \
             f'{limit_bytes // 1024} KiB'
         raise error(f'{path}: larger than {size}, the limit for {what}')
     return data
+
+
+class StrictLoader(yaml.SafeLoader):
+    """PyYAML's safe loader that refuses a mapping key given twice."""
+
+    def construct_mapping(self, node, deep=False):
+        """Return the mapping of node; raise ConstructorError on a repeated key."""
+        if isinstance(node, yaml.MappingNode):
+            seen = {}
+            for key_node, _ in node.value:
+                if key_node.tag == 'tag:yaml.org,2002:merge':
+                    continue  # a merge (<<) brings keys a later one may override
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    first = seen.setdefault(key, key_node.start_mark)
+                except TypeError:  # an unhashable key: the base class says so
+                    break
+                if first is not key_node.start_mark:
+                    raise yaml.constructor.ConstructorError(
+                        'while constructing a mapping', node.start_mark,
+                        f'found the key {key!r} a second time (first on line '
+                        f'{first.line + 1}): each key may be given once',
+                        key_node.start_mark)
+        return super().construct_mapping(node, deep)
+
+
+def load_yaml(text):
+    """
+    Return the document of YAML text, as yaml.safe_load would, refusing a repeated key.
+
+    :raises yaml.YAMLError: malformed YAML, or a mapping that gives a key twice (the message
+        names the key and both lines)
+    """
+    return yaml.load(text, Loader=StrictLoader)  # a SafeLoader: plain data only
 
 
 class FieldReader:

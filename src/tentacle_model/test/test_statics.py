@@ -160,11 +160,16 @@ def test_command_line_knobs(capsys):
 
     field = ['--field', '0', '0.002', '0.001']
     plain = run('braided_chapter5.yaml', *field, '--dof', '3')
-    linear = run('braided_chapter5.yaml', *field, '--dof', '3', '--linear')
     interacting = run('braided_chapter5.yaml', *field, '--dof', '3', '--dipoles')
-    assert linear['linear'] and linear['iterations'] == 1 and interacting['dipoles']
+    assert interacting['dipoles']
     assert 1e-4 < np.linalg.norm(np.subtract(interacting['tip'], plain['tip'])) < 2e-3
-    assert 1e-4 < np.linalg.norm(np.subtract(linear['tip'], plain['tip'])) < 5e-3
+    # The small-angle model within its range (this field turns the tip 0.16 rad; the one
+    # above, 0.66 rad, is outside it: test_user_files.py).
+    small = ['--field', '0', '0.0005', '0.00025']
+    linear = run('braided_chapter5.yaml', *small, '--dof', '3', '--linear')
+    plain = run('braided_chapter5.yaml', *small, '--dof', '3')
+    assert linear['linear'] and linear['iterations'] == 1
+    assert 1e-5 < np.linalg.norm(np.subtract(linear['tip'], plain['tip'])) < 1e-3
     # The chapter 6 strip with its backbone 20 mm out: the first 20 mm barely bend.
     strip = run('vsr_chapter6.yaml', '--field', '0', '0.01', '0', '--backbone', '0.02')
     free = run('vsr_chapter6.yaml', '--field', '0', '0.01', '0')

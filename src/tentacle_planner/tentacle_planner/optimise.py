@@ -19,6 +19,7 @@ equilibrium wins. A seed reproduces a plan exactly: budgets, not clocks, end eve
 """
 
 from dataclasses import dataclass, field, replace
+import itertools
 import math
 
 import numpy as np
@@ -445,7 +446,8 @@ def optimise(problem, *, seed=0, starts=8, iterations=100, initial=None, progres
     :param iterations: model evaluations per start (and SLSQP iterations where limits other
         than per-axis bounds apply): the budget that ends each start
     :param initial: an x to try first (e.g. the tip-driven baseline or a previous plan)
-    :param progress: called with (start index, starts, best objective so far)
+    :param progress: called with (start index, starts, best objective so far) after each
+        start, and with (steps fitted, steps, None) while the insertion-order start is built
     :param first_stage: fit each start on the thesis' torque balance first (balance.py),
         then on the forward model
     """
@@ -456,36 +458,63 @@ def optimise(problem, *, seed=0, starts=8, iterations=100, initial=None, progres
     n_dir = len(problem.free_segments) * problem.angles_per_segment
     candidates = [] if initial is None else [np.asarray(initial, dtype=float)]
     if starts and isinstance(problem, Problem):
-        candidates.append(insertion_order_start(problem, rng, iterations))
+        try:
+            candidates.append(insertion_order_start(problem, rng, iterations,
+                                                    progress=progress))
+        except StartInterrupted as exc:
+            # Ctrl-C while the rig's own order is fitted (all of a fields-only search):
+            # the steps fitted so far, the rest holding the last field.
+            plan = problem.plan(np.clip(exc.x, *_limits(problem)))
+            return replace(plan, interrupted=True,
+                           flags=plan.flags + [f'interrupted: the best plan so far (the first '
+                                               f'{exc.fitted} of {len(problem.steps_m)} '
+                                               'steps fitted)'])
         if not n_dir:
             # Fields alone: each step's equilibrium depends on its own field and the state
             # before it, so the steps separate and the insertion-order start, which fits
             # them in turn as the rig runs them, is the search; random fields add nothing.
             starts = 0
-    for _ in range(starts):
+
+    def random_start():
         directions = rng.uniform(-math.pi, math.pi, n_dir)
         if problem.angles_per_segment == 2:
             directions[1::2] *= 0.25  # elevations within +-45 deg
         fields = rng.uniform(-0.5, 0.5, problem.size - n_dir) * limit / MILLITESLA
-        candidates.append(np.concatenate([directions, fields]))
-    best, best_key = None, None
-    for index, x0 in enumerate(candidates):
-        try:
+        return np.concatenate([directions, fields])
+
+    # Each random start is drawn when its turn comes (in the same order, so the same seed
+    # gives the same plan): a million starts take no memory before the first is fitted.
+    total = len(candidates) + starts
+    candidates = itertools.chain(candidates, (random_start() for _ in range(starts)))
+    best, best_key, x0 = None, None, None
+    try:  # all of the loop: Ctrl-C may land between two fits too
+        for index, x0 in enumerate(candidates):
             if balance is not None:
                 x0 = fit(balance, x0, iterations)
             plan = problem.plan(fit(problem, x0, iterations))
-        except KeyboardInterrupt:
-            # Ctrl-C keeps the best plan so far (or the start itself, if none is done).
-            fallback = best or problem.plan(np.clip(x0, *_limits(problem)))
-            return replace(fallback, interrupted=True,
-                           flags=fallback.flags + ['interrupted: the best plan so far'])
-        # A plan that relies on no unstable step and breaks no limit beats any that does.
-        key = (len(plan.flags), plan.objective)
-        if best_key is None or key < best_key:
-            best, best_key = plan, key
-        if progress is not None:
-            progress(index + 1, len(candidates), best.objective)
+            # A plan that relies on no unstable step and breaks no limit beats any that does.
+            key = (len(plan.flags), plan.objective)
+            if best_key is None or key < best_key:
+                best, best_key = plan, key
+            if progress is not None:
+                progress(index + 1, total, best.objective)
+    except KeyboardInterrupt:
+        # Ctrl-C keeps the best plan so far (or the start itself, if none is done).
+        if best is None and x0 is None:
+            raise
+        fallback = best or problem.plan(np.clip(x0, *_limits(problem)))
+        return replace(fallback, interrupted=True,
+                       flags=fallback.flags + ['interrupted: the best plan so far'])
     return best
+
+
+class StartInterrupted(KeyboardInterrupt):
+    """Ctrl-C during insertion_order_start, after some steps were fitted: x holds them."""
+
+    def __init__(self, x, fitted):
+        """Keep the unknowns x (the steps after the fitted ones hold the last field)."""
+        super().__init__()
+        self.x, self.fitted = x, fitted
 
 
 def _limits(problem):
@@ -495,7 +524,7 @@ def _limits(problem):
             np.array([np.inf if b[1] is None else b[1] for b in box]))
 
 
-def insertion_order_start(problem, rng, iterations=100, tries=4):
+def insertion_order_start(problem, rng, iterations=100, tries=4, progress=None):
     """
     Return a start built as the rig inserts: each step fits the segments it brings in.
 
@@ -504,14 +533,30 @@ def insertion_order_start(problem, rng, iterations=100, tries=4):
     from the step before, so each stage is a small fit (a few random tries of the new
     directions, fewer once one fits within STAGE_GOOD). The whole problem is then polished
     from the result.
+
+    :param progress: called with (steps fitted, steps, None) after each step
+    :raises StartInterrupted: Ctrl-C once a step is fitted (KeyboardInterrupt before)
     """
+    directions, _ = problem.unpack(np.zeros(problem.size))
+    fields = []
+    try:
+        _fit_in_insertion_order(problem, rng, iterations, tries, directions, fields, progress)
+    except KeyboardInterrupt:
+        if not fields:
+            raise
+        raise StartInterrupted(problem.pack(directions, fields + [fields[-1]] * (
+            len(problem.steps_m) - len(fields))), len(fields)) from None
+    return problem.pack(directions, fields)
+
+
+def _fit_in_insertion_order(problem, rng, iterations, tries, directions, fields, progress):
+    """Fit insertion_order_start's stages: append each step's field, update directions."""
     model, c = problem.model, problem.constraints
     # Stages keep the per-axis field bounds only: the whole problem's fit, which polishes
     # the start, applies every other limit (a stage's SLSQP took most of the time).
     bounds_only = replace(c, max_total_field_t=None, max_field_change_t=None,
                           max_neighbour_angle_rad=None)
-    directions, _ = problem.unpack(np.zeros(problem.size))
-    fields, seen, start = [], set(), None
+    seen, start = set(), None
     field_t = np.zeros(3)
     for inserted_m, backbone_m, target in zip(problem.steps_m, problem.backbones_m,
                                               problem.targets):
@@ -521,8 +566,9 @@ def insertion_order_start(problem, rng, iterations=100, tries=4):
         new = sorted(entering & set(problem.free_segments))  # a held direction stays held
         best = None
         for _ in range(tries):
-            stage = Problem(model, [inserted_m], [target], bounds_only, directions=directions,
-                            start=start, free=new, backbones_m=[backbone_m])
+            stage = Problem(model, [inserted_m], [target], bounds_only,
+                            directions=directions.copy(), start=start, free=new,
+                            backbones_m=[backbone_m])
             guess = directions.copy()
             for i in stage.free_segments:
                 guess[i] = _direction(rng.uniform(-math.pi, math.pi),
@@ -535,11 +581,14 @@ def insertion_order_start(problem, rng, iterations=100, tries=4):
             if not stage.free_segments or value < STAGE_GOOD:
                 break
         _, stage, x = best
-        directions, stage_fields = stage.unpack(x)
+        stage_directions, stage_fields = stage.unpack(x)
+        state = stage.simulate(x)[-1].state
+        directions[:] = stage_directions  # a step counts once all of it is in
         field_t = stage_fields[0]
         fields.append(field_t)
-        start = (stage.simulate(x)[-1].state, inserted_m)
-    return problem.pack(directions, fields)
+        start = (state, inserted_m)
+        if progress is not None:
+            progress(len(fields), len(problem.steps_m), None)
 
 
 def fit(problem, x0, iterations=100):

@@ -7,7 +7,7 @@ base position) on. Where it comes from:
 - ``points_m`` in a scene: ``[[x, y, z], ...]``, metres;
 - CSV: ``#`` lines are comments; a header row names the columns ``x_<unit>``, ``y_<unit>``,
   ``z_<unit>`` (unit ``m``, ``mm`` or ``um``; other columns are ignored), one point a row;
-- ``.npy``: a (k, 3) array of numbers, metres;
+- ``.npy``: a (k, 3) array of numbers, metres (its header is checked before it is loaded);
 - 3D Slicer ``.mrk.json``: the first markup only (as Slicer loads it), a Curve or a point list
   (``Fiducial``); ``coordinateSystem`` LPS (the default) or RAS, ``coordinateUnits`` mm (the
   default), um or m, also as a UCUM coded entry; a point whose position is undefined (or only
@@ -16,7 +16,8 @@ base position) on. Where it comes from:
   0 = RAS, 1 = LPS; without the line LPS, as Slicer reads it); columns id,x,y,z,... at fixed
   places as Slicer reads them (a ``# columns`` line that says otherwise is refused).
 
-Slicer coordinates are taken as RAS, the frame Slicer shows (LPS to RAS negates x and y). Point
+A path file has at most MAX_PATH_POINTS points (checked before they are parsed). Slicer
+coordinates are taken as RAS, the frame Slicer shows (LPS to RAS negates x and y). Point
 numbers in messages count from 0, in the order of the file.
 
 Frames: ``rig`` (the default for inline points, CSV and npy): the points are rig coordinates
@@ -63,6 +64,14 @@ The largest path file read, bytes (it reads at most one byte more).
 
 Slicer writes about 0.85 kB of JSON a control point: 32 MiB is some 38,000 points, read and
 checked in half a second here (a centreline has a few points a millimetre).
+"""
+MAX_PATH_POINTS = 1_000_000
+"""
+The most points a path file may hold; more are refused before they are parsed.
+
+A .npy's header is read first and its shape checked against this (a 176-byte file may claim
+10^12 points: loading it would allocate them). Checking and planning along a million
+points takes about 2 s here; the schedule carries a long path thinned (schedule.py).
 """
 UNITS_M = {'m': 1.0, 'mm': 1e-3, 'um': 1e-6}
 SLICER_TYPES = ('Curve', 'Fiducial')  # Fiducial: Slicer's name for a point list
@@ -352,7 +361,42 @@ def read_path_file(file):
     return points, ('rig' if reader is _read_csv else 'image')
 
 
+def _npy_header(data, file):
+    """
+    Return (shape, dtype) from a .npy file's header, checked before any array is made.
+
+    :raises PlanInputError: not a .npy header, an array that is not (k, 3) real numbers, more
+        than MAX_PATH_POINTS points, or more points than the file has bytes for
+    """
+    stream = io.BytesIO(data)
+    try:
+        version = np.lib.format.read_magic(stream)
+        read_header = {(1, 0): np.lib.format.read_array_header_1_0,
+                       (2, 0): np.lib.format.read_array_header_2_0}.get(version)
+        if read_header is None:
+            raise ValueError(f'format version {version[0]}.{version[1]} (1.0 or 2.0 expected)')
+        shape, _, dtype = read_header(stream)
+    except (ValueError, OSError, EOFError, SyntaxError) as exc:
+        raise PlanInputError(f'{file}: not a readable .npy array ({exc})') from None
+    if dtype.hasobject:  # np.load would refuse it too: unpickling runs code
+        raise PlanInputError(f'{file}: not a readable .npy array (it holds Python objects, '
+                             'which are not read: save an array of numbers)')
+    if dtype.kind not in 'iuf':
+        raise PlanInputError(f'{file}: expected an array of real numbers, got dtype {dtype}')
+    if len(shape) != 2 or shape[1] != 3:
+        raise PlanInputError(f'{file}: expected a (k, 3) array, metres, got shape {shape}')
+    if shape[0] > MAX_PATH_POINTS:
+        raise PlanInputError(f'{file}: its header says {shape[0]} points, more than the '
+                             f'{MAX_PATH_POINTS} a path may have: resample it')
+    if shape[0] * 3 * dtype.itemsize > len(data) - stream.tell():
+        raise PlanInputError(f'{file}: its header says {shape[0]} points, but the file has '
+                             f'{len(data) - stream.tell()} bytes of data, not '
+                             f'{shape[0] * 3 * dtype.itemsize}: a truncated or damaged file')
+    return shape, dtype
+
+
 def _read_npy(data, file):
+    _npy_header(data, file)
     try:
         array = np.load(io.BytesIO(data), allow_pickle=False)
     except (ValueError, OSError, EOFError) as exc:
@@ -395,6 +439,7 @@ def _read_csv(text, file):
                              'with the unit m or um)')
     if len(lines) == 1:
         raise PlanInputError(f'{file}: no points (only a header)')
+    _check_count(len(lines) - 1, file)
     points = []
     for number, line in lines[1:]:
         fields = _csv_fields(line, file, number)
@@ -412,6 +457,13 @@ def _read_csv(text, file):
                                      'number') from None
         points.append(row)
     return np.array(points)
+
+
+def _check_count(points, file):
+    """Refuse a file of more than MAX_PATH_POINTS points before they are parsed."""
+    if points > MAX_PATH_POINTS:
+        raise PlanInputError(f'{file}: {points} points, more than the {MAX_PATH_POINTS} a '
+                             'path may have: resample it')
 
 
 def _csv_fields(line, file, number):
@@ -458,6 +510,7 @@ def _read_markups(text, file):
                              f'{type(raw).__name__}')
     if not raw:
         raise PlanInputError(f'{where}.controlPoints: no points')
+    _check_count(len(raw), file)
     points = []
     for i, point in enumerate(raw):
         at = f'{where}.controlPoints[{i}]'
@@ -482,7 +535,10 @@ def _read_markups(text, file):
 def _read_fcsv(text, file):
     system = 'LPS'  # what Slicer assumes of a file without the line
     points = []
-    for number, line in enumerate(text.splitlines(), 1):
+    lines = text.splitlines()
+    _check_count(sum(1 for line in lines if line.strip() and not line.lstrip().startswith('#')),
+                 file)
+    for number, line in enumerate(lines, 1):
         stripped = line.strip()
         if not stripped:
             continue

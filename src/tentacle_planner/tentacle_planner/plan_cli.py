@@ -7,17 +7,29 @@ tentacle-plan: a magnetisation profile and field schedule for a scene, verified.
 
 Writes DIR/schedule.yaml (DESIGN.md's schema) and DIR/plan.png and prints a summary. Exit
 code 0 for a plan without flags, 3 when the plan is flagged (an unstable or unconverged
-step, a broken limit: written, and said so, never as fine), 2 for bad input, 130 after
-Ctrl-C (the best plan so far is written, marked interrupted).
+step, a broken limit: written, and said so, never as fine), 2 for bad input (DIR that
+cannot be written is found before planning), 130 after Ctrl-C.
+
+Ctrl-C, in any phase: once a plan exists (the first start fitted, or the first step of
+the insertion-order start) the best plan so far is written, marked interrupted, with a flag
+naming what was left out (dense playback, the robustness report, the re-check), and said
+so; before that, or while the files are written, nothing is written, and that is said. A
+run replaces the previous run's schedule.yaml and plan.png in DIR: each is written under a
+temporary name and renamed, and the previous picture is removed before the new schedule
+goes in, so DIR never holds two runs' files (schedule.py).
 """
 
 import argparse
+import os
+import pathlib
 import sys
+import tempfile
 
 from tentacle_planner.errors import PlanInputError
-from tentacle_planner.planner import plan_scene
-from tentacle_planner.scene import load_scene, scene_of
-from tentacle_planner.schedule import summary, write_schedule
+
+MAX_STARTS = 10_000       # random starts: each is a fit of its own (seconds)
+MAX_ITERATIONS = 100_000  # model evaluations per start
+INTERRUPTED = 130         # the shell's code for Ctrl-C (128 + SIGINT)
 
 
 def build_parser():
@@ -49,10 +61,12 @@ def build_parser():
                        help="magnetise in the link's x-y plane only")
     parser.add_argument('--out', required=True, metavar='DIR',
                         help='where schedule.yaml and plan.png go')
-    parser.add_argument('--seed', type=int, default=0, help='seeds the multi-start')
-    parser.add_argument('--starts', type=int, default=8, help='random starts (default 8)')
-    parser.add_argument('--iterations', type=int, default=100,
-                        help='model evaluations per start (default 100)')
+    parser.add_argument('--seed', type=_whole(0), default=0,
+                        help='seeds the multi-start: a whole number >= 0')
+    parser.add_argument('--starts', type=_whole(1, MAX_STARTS), default=8,
+                        help=f'random starts, 1 to {MAX_STARTS} (default 8)')
+    parser.add_argument('--iterations', type=_whole(1, MAX_ITERATIONS), default=100,
+                        help=f'model evaluations per start, 1 to {MAX_ITERATIONS} (default 100)')
     parser.add_argument('--baseline', choices=('tip-driven',), default=None,
                         help='tip-driven: every magnetisation axial, fields only')
     parser.add_argument('--first-stage', choices=('torque-balance',), default=None,
@@ -61,6 +75,21 @@ def build_parser():
     parser.add_argument('--robust', action='store_true',
                         help='plan against every perturbed model, not only the nominal one')
     return parser
+
+
+def _whole(low, high=None):
+    """Return an argparse type: a whole number from low to high (None: no upper bound)."""
+    def parse(text):
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f'expected a whole number, got {text!r}') from None
+        if value < low or (high is not None and value > high):
+            raise argparse.ArgumentTypeError(
+                f'{value} is not ' + (f'from {low} to {high}' if high is not None
+                                      else f'>= {low}'))
+        return value
+    return parse
 
 
 def _lengths(text):
@@ -73,6 +102,7 @@ def _lengths(text):
 
 def _scene(opts):
     """Return the Scene of the options: a scene file, or a tentacle and a path file."""
+    from tentacle_planner.scene import load_scene, scene_of
     if opts.scene:
         return load_scene(opts.scene)
     coil = {'max_field_t': opts.max_field, 'max_total_field_t': opts.max_total_field,
@@ -86,18 +116,54 @@ def _scene(opts):
 
 
 def _progress(stage, done, total, best):
+    """Draw a progress bar on stderr: starts (with the best objective) or steps (best None)."""
     bar = '#' * round(20 * done / max(total, 1))
-    print(f'\r{stage}: [{bar:<20}] {done}/{total} starts, best objective {best:.3g}',
-          end='' if done < total else '\n', file=sys.stderr, flush=True)
+    what = 'steps' if best is None else f'starts, best objective {best:.3g}'
+    _progress.open = done < total  # a line still to be ended (_say)
+    print(f'\r{stage}: [{bar:<20}] {done}/{total} {what}', end='' if done < total else '\n',
+          file=sys.stderr, flush=True)
+
+
+_progress.open = False
+
+
+def _say(message):
+    """Print a message to stderr, on a line of its own after a progress bar."""
+    print(('\n' if _progress.open else '') + f'tentacle-plan: {message}', file=sys.stderr)
+    _progress.open = False
+
+
+def output_problem(out, names):
+    """
+    Return why the folder out cannot take a run's outputs (files named names), or None.
+
+    Tried, not guessed (permissions say little to root, or under /proc): a file is made and
+    removed in the folder, or in its nearest existing parent when it is still to be made.
+    """
+    path = pathlib.Path(out).absolute()
+    if path.exists() and not path.is_dir():
+        return f'{out} exists and is not a folder'
+    for name in names:
+        if (path / name).exists() and not (path / name).is_file():
+            return f'{path / name} exists and is not a file'
+    existing = path
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        return f'{out}: {existing} is not a folder'
+    try:
+        fd, probe = tempfile.mkstemp(dir=existing, prefix='.tentacle-plan-', suffix='.probe')
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        return f'{out}: cannot write in {existing} ({exc.strerror})'
+    return None
 
 
 def main(args=None):
     """Plan, write and summarise; return the exit code."""
     parser = build_parser()
     opts = parser.parse_args(args)
-    if opts.starts < 0 or opts.iterations < 1:
-        print('tentacle-plan: --starts must be >= 0 and --iterations >= 1', file=sys.stderr)
-        return 2
     single = ('tentacle', 'path', 'frame', 'steps', 'playback_step', 'max_field',
               'max_total_field', 'max_field_change', 'max_neighbour_angle')
     if opts.scene and any(getattr(opts, k) is not None for k in single):
@@ -105,20 +171,58 @@ def main(args=None):
                      '--tentacle and --path with the limits as options')
     if not opts.scene and not (opts.tentacle and opts.path):
         parser.error('give --scene FILE, or --tentacle FILE and --path FILE')
+    result = None
     try:
+        # Imported here, where Ctrl-C is handled: numpy, scipy, numba and matplotlib take
+        # most of the first second.
+        from tentacle_planner.planner import plan_scene
+        from tentacle_planner.schedule import OUTPUTS
+        problem = output_problem(opts.out, OUTPUTS)
+        if problem:
+            _say(f'--out {problem}')
+            return 2
         scene = _scene(opts)
+        result = plan_scene(scene, seed=opts.seed, starts=opts.starts,
+                            iterations=opts.iterations,
+                            tip_driven=opts.baseline == 'tip-driven', robust=opts.robust,
+                            progress=_progress,
+                            first_stage=opts.first_stage == 'torque-balance')
+        return _write(opts.out, result)
     except PlanInputError as exc:
-        print(f'tentacle-plan: {exc}', file=sys.stderr)
+        _say(exc)
         return 2
-    result = plan_scene(scene, seed=opts.seed, starts=opts.starts, iterations=opts.iterations,
-                        tip_driven=opts.baseline == 'tip-driven', robust=opts.robust,
-                        progress=_progress, first_stage=opts.first_stage == 'torque-balance')
-    path = write_schedule(opts.out, result)
-    print(summary(result))
-    print(f'wrote {path} and {path.parent / "plan.png"}')
-    if result.interrupted:
-        return 130
-    return 3 if result.flags else 0
+    except KeyboardInterrupt:
+        when = 'before a plan was found' if result is None else 'before the plan was written'
+        _say(f'interrupted {when}: nothing written (what {opts.out} held is as it was)')
+        return INTERRUPTED
+
+
+def _write(out, result):
+    """Write the outputs and the summary; return the exit code."""
+    from tentacle_planner.schedule import summary, write_plot, write_schedule_file
+    written, interrupted = [], result.interrupted
+    try:
+        written.append(write_schedule_file(out, result))
+        written.append(write_plot(out, result))
+        print(summary(result))
+    except KeyboardInterrupt:
+        interrupted = True
+    except OSError as exc:  # the folder was checked before planning; it changed since
+        _say(f'{out}: cannot write ({exc.strerror}); written: '
+             f'{", ".join(map(str, written)) or "nothing"}')
+        return 2
+    if written:
+        print(f'wrote {" and ".join(map(str, written))}')
+    if not interrupted:
+        return 3 if result.flags else 0
+    if not written:
+        _say('interrupted while writing the schedule: nothing written')
+        return INTERRUPTED
+    what = 'the best plan so far' if result.interrupted else 'the plan'
+    _say(f'interrupted: wrote {what} to {written[0]}'
+         + (' and its picture' if len(written) == 2 else ', not its picture')
+         + (' (its flags say what was left out)' if result.interrupted else ''))
+    return INTERRUPTED
 
 
 if __name__ == '__main__':

@@ -154,11 +154,14 @@ def plan_scene(scene, *, seed=0, starts=8, iterations=100, tip_driven=False, rob
     :param robust: plan against the worst of the perturbed models, not the nominal one
     :param progress: called with (stage, done, total, best objective)
     :param first_stage: fit each start on the thesis' torque balance first (balance.py)
+
+    Ctrl-C (KeyboardInterrupt) in the search returns the best plan so far, marked
+    interrupted; after a plan exists, Ctrl-C in any later phase (the robust plan, dense
+    playback, the robustness report, the re-check) skips that phase and the rest and
+    returns the plan with a flag that says what was left out. Before any plan exists
+    (setting up, the first step of the first start), KeyboardInterrupt propagates.
     """
     problem = problem_of(scene, tip_driven)
-
-    def error(step):
-        return scene.shape_error(step)[0]
 
     def report_progress(stage):
         return None if progress is None else (
@@ -166,31 +169,69 @@ def plan_scene(scene, *, seed=0, starts=8, iterations=100, tip_driven=False, rob
 
     nominal = optimise(problem, seed=seed, starts=starts, iterations=iterations,
                        progress=report_progress('plan'), first_stage=first_stage)
+    try:
+        return _after_search(scene, problem, nominal, seed, iterations, robust,
+                             report_progress)
+    except KeyboardInterrupt:  # between two phases: the plan alone
+        return SceneResult(scene, nominal, nominal, None, [], [], [], [],
+                           list(nominal.flags) + ['interrupted: left out everything after '
+                                                  'the search'], True)
+
+
+def _after_search(scene, problem, nominal, seed, iterations, robust, report_progress):
+    """Return plan_scene's SceneResult from the nominal plan: the phases after the search."""
+    def error(step):
+        return scene.shape_error(step)[0]
+
     interrupted = nominal.interrupted
-    problems = perturbed_problems(problem)
+    skipped = []
+
+    def phase(what, run, otherwise):
+        """Return run(), or otherwise once interrupted (now, or in an earlier phase)."""
+        nonlocal interrupted
+        if not interrupted:
+            try:
+                return run()
+            except KeyboardInterrupt:
+                interrupted = True
+        skipped.append(what)
+        return otherwise
+
+    problems = phase('the robustness report', lambda: perturbed_problems(problem), [])
     robust_plan, robust_rows = None, []
-    if robust and not interrupted:
-        robust_plan = optimise(RobustProblem(problems), seed=seed, starts=0,
-                               iterations=iterations,
-                               initial=problem.pack(nominal.directions, nominal.fields_t),
-                               progress=report_progress('robust'))
-        interrupted = robust_plan.interrupted
-        robust_rows = report(problems, robust_plan, error)
+    if robust:
+        robust_plan = phase('the robust plan', lambda: optimise(
+            RobustProblem(problems), seed=seed, starts=0, iterations=iterations,
+            initial=problem.pack(nominal.directions, nominal.fields_t),
+            progress=report_progress('robust')), None)
+        if robust_plan is not None and robust_plan.interrupted:
+            interrupted, robust_plan = True, None  # the nominal plan: it is complete
+            skipped.append('the robust plan')
+        if robust_plan is not None:
+            robust_rows = phase("the robust plan's robustness report",
+                                lambda: report(problems, robust_plan, error), [])
     plan = robust_plan or nominal
     flags = list(plan.flags) + contact_flags(scene, plan.steps)
     dense = []
-    if scene.playback_step_m and not interrupted:
-        dense, dense_flags = playback(
-            problem.model, plan, lambda chain, inserted: paths.targets(scene.path, chain,
-                                                                       inserted),
-            scene.playback_step_m, problem.constraints)
-        key = {round(s.inserted_m, 12) for s in plan.steps}
-        flags += dense_flags + contact_flags(
-            scene, [s for s in dense if round(s.inserted_m, 12) not in key])
-    verification, recheck_flags = recheck(scene, plan)
+    if scene.playback_step_m:
+        def dense_playback():
+            steps, dense_flags = playback(
+                problem.model, plan, lambda chain, inserted: paths.targets(scene.path, chain,
+                                                                           inserted),
+                scene.playback_step_m, problem.constraints, progress=report_progress(
+                    'playback'))
+            key = {round(s.inserted_m, 12) for s in plan.steps}
+            return steps, dense_flags + contact_flags(
+                scene, [s for s in steps if round(s.inserted_m, 12) not in key])
+        dense, dense_flags = phase('dense playback (key steps only)', dense_playback, ([], []))
+        flags += dense_flags
+    robustness = phase('the robustness report', lambda: report(problems, nominal, error), [])
+    verification, recheck_flags = phase('the re-check in fuller models',
+                                        lambda: recheck(scene, plan), ([], []))
     flags += recheck_flags
-    return SceneResult(scene, plan, nominal, robust_plan, dense,
-                       report(problems, nominal, error),
+    if skipped:
+        flags.append('interrupted: left out ' + ', '.join(dict.fromkeys(skipped)))
+    return SceneResult(scene, plan, nominal, robust_plan, dense, robustness,
                        robust_rows, verification, flags, interrupted)
 
 

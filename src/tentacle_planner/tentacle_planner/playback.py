@@ -21,7 +21,7 @@ def dense_lengths(key_steps_m, step_m):
     return [float(v) for v in lengths if v > 0]
 
 
-def playback(model, plan, target, step_m, constraints, iterations=50):
+def playback(model, plan, target, step_m, constraints, iterations=50, progress=None):
     """
     Return (dense Steps, flags) for a plan.
 
@@ -32,11 +32,13 @@ def playback(model, plan, target, step_m, constraints, iterations=50):
     :param constraints: Constraints (field limits apply at every dense step; a field change
         over max_field_change_t between consecutive dense steps is flagged)
     :param iterations: Gauss-Newton budget per dense step
+    :param progress: called with (steps done, steps, None) after every dense step
     """
     key_m = np.array([s.inserted_m for s in plan.steps])
     key_fields = plan.fields_t
     steps, flags, start = [], [], None
-    for inserted_m in dense_lengths(list(key_m), step_m):
+    lengths = dense_lengths(list(key_m), step_m)
+    for inserted_m in lengths:
         guess = np.array([np.interp(inserted_m, key_m, key_fields[:, axis]) for axis in range(3)])
         problem = Problem(model, [inserted_m], [target(model.chain(inserted_m), inserted_m)],
                           constraints, directions=plan.directions, start=start)
@@ -54,4 +56,6 @@ def playback(model, plan, target, step_m, constraints, iterations=50):
             flags.append(f'field change over the limit into the dense step at '
                          f'{inserted_m * 1e3:.1f} mm')
         start = (solution.state, inserted_m)
+        if progress is not None:
+            progress(len(steps), len(lengths), None)
     return steps, flags

@@ -23,6 +23,8 @@ path with a coiling target and moves the backbone instead of the body::
     backbone_steps_m: [0.0775, 0.075, ...]  # its reach past the base at each key step
 
 Required: tentacle, insertion_steps_m, and path or coiling (coiling with backbone_steps_m).
+Steps: at most MAX_KEY_STEPS; each, the advance between two and playback_step_m at least
+MIN_STEP_M; at most MAX_PLAYBACK_STEPS dense steps.
 Every other key is optional, and so is each key of coil, model and magnetisation: an omitted
 limit is no limit, an omitted switch is off, and the model defaults to 3-DoF joints, one link
 per segment, no gravity, no magnet-to-magnet interaction. coil limits: max_field_t each
@@ -48,7 +50,7 @@ from tentacle_model import statics
 from tentacle_model.chain import discretise
 from tentacle_model.model import TentacleModel
 from tentacle_model.tentacle_spec import load_tentacle, SpecError, TentacleSpec
-from tentacle_model.user_files import FieldReader, read_capped
+from tentacle_model.user_files import FieldReader, load_yaml, read_capped
 from tentacle_planner import paths
 from tentacle_planner.errors import PlanInputError
 import yaml
@@ -61,6 +63,13 @@ COIL_PATH_STEP_M = 0.25e-3  # the points of a coiling target, this far apart
 COIL_KEYS = ('max_field_t', 'max_total_field_t', 'max_field_change_t')
 MODEL_KEYS = ('dof', 'sublinks', 'gravity_m_s2', 'dipoles')
 MAGNETISATION_KEYS = ('planar', 'max_neighbour_angle_deg', 'distal_axial', 'given')
+MIN_STEP_M = 1e-5
+"""
+The smallest insertion step, m: a key step's inserted length, the advance between two key
+steps and playback_step_m are at least this (10 um; the rig's stages step 0.1 mm and more).
+"""
+MAX_KEY_STEPS = 200  # key steps (or backbone positions): every evaluation solves each one
+MAX_PLAYBACK_STEPS = 2000  # dense steps (deepest key step / playback_step_m): a fit each
 
 
 @dataclass(frozen=True)
@@ -186,9 +195,10 @@ def load_scene(path):
 
     :param path: the scene YAML file
     :return: a Scene
-    :raises PlanInputError: an unreadable, oversized, empty or malformed file, a key unknown,
-        missing, of the wrong type or out of range, or a tentacle or path file that is;
-        the message names the file and the key (and the point of a path)
+    :raises PlanInputError: an unreadable, oversized, empty or malformed file (a key given
+        twice is malformed), a key unknown, missing, of the wrong type or out of range, or
+        a tentacle or path file that is; the message names the file and the key (and the
+        point of a path)
     """
     source = pathlib.Path(path)
     data = read_capped(source, MAX_FILE_BYTES, PlanInputError,
@@ -199,8 +209,8 @@ def load_scene(path):
         raise PlanInputError(f'{source}: not UTF-8 text ({exc.reason} at byte {exc.start})') \
             from None
     try:
-        document = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
+        document = load_yaml(text)
+    except yaml.YAMLError as exc:  # a repeated key too
         raise PlanInputError(f'{source}: not valid YAML: {exc}') from None
     except RecursionError:
         raise PlanInputError(f'{source}: not valid YAML: nested too deeply') from None
@@ -283,6 +293,13 @@ def parse_scene(document, source, sha256=''):
         if playback > steps[-1]:
             read.fail('playback_step_m', f'{playback:g} m is more than the deepest insertion '
                       f'step, {steps[-1]:g} m')
+        if playback < MIN_STEP_M:
+            read.fail('playback_step_m', f'{playback:g} m is less than the smallest step, '
+                      f'{MIN_STEP_M:g} m')
+        if steps[-1] / playback > MAX_PLAYBACK_STEPS:
+            read.fail('playback_step_m', f'{playback:g} m makes {steps[-1] / playback:.0f} '
+                      f'dense steps to {steps[-1]:g} m, more than the {MAX_PLAYBACK_STEPS} '
+                      f'planned at most: take at least {steps[-1] / MAX_PLAYBACK_STEPS:.3g} m')
     try:
         chain = discretise(spec, steps[-1], model.sublinks)
         statics.check_size(chain.size, model.dof,
@@ -347,6 +364,9 @@ def _backbone_steps(read, doc, spec):
     if not isinstance(raw, list) or not raw:
         read.fail('backbone_steps_m', f'expected a non-empty list of backbone reaches past '
                   f'the base (m), got {raw!r}')
+    if len(raw) > MAX_KEY_STEPS:
+        read.fail('backbone_steps_m', f'{len(raw)} steps, more than the {MAX_KEY_STEPS} a '
+                  'scene may have')
     backbones = [read.number(v, f'backbone_steps_m[{i}]', allow_zero=True)
                  for i, v in enumerate(raw)]
     inserted = _steps(read, doc['insertion_steps_m'], spec, increasing=False)
@@ -378,6 +398,9 @@ def _steps(read, raw, spec, increasing=True):
     if not isinstance(raw, list) or not raw:
         read.fail('insertion_steps_m', f'expected a non-empty list of inserted lengths (m), '
                   f'got {raw!r}')
+    if len(raw) > MAX_KEY_STEPS:
+        read.fail('insertion_steps_m', f'{len(raw)} steps, more than the {MAX_KEY_STEPS} a '
+                  'scene may have')
     steps = []
     for i, value in enumerate(raw):
         where = f'insertion_steps_m[{i}]'
@@ -385,9 +408,15 @@ def _steps(read, raw, spec, increasing=True):
         if step > spec.length_m * (1 + 1e-12):
             read.fail(where, f'{step:g} m is more than the length of the tentacle, '
                       f'{spec.length_m:g} m')
+        if step < MIN_STEP_M:
+            read.fail(where, f'{step:g} m is less than the smallest step, {MIN_STEP_M:g} m')
         if steps and (step <= steps[-1] if increasing else step < steps[-1]):
             read.fail(where, f'{step:g} m does not increase on insertion_steps_m[{i - 1}] '
                       f'({steps[-1]:g} m): steps are in insertion order')
+        if steps and step != steps[-1] and step - steps[-1] < MIN_STEP_M:
+            read.fail(where, f'{step:g} m is {step - steps[-1]:.3g} m past '
+                      f'insertion_steps_m[{i - 1}] ({steps[-1]:g} m): steps are at least '
+                      f'{MIN_STEP_M:g} m apart')
         steps.append(min(step, spec.length_m))
     return tuple(steps)
 

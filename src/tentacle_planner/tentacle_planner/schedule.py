@@ -8,15 +8,38 @@ per step the insertion, field, predicted centreline, shape RMS, tip error and st
 (every dense playback step when the scene asks for them, key steps marked), the robustness
 figures and the flags. ``plot_plan`` draws DIR/plan.png. Shape errors are the project's
 (paths.shape_error).
+
+A path of more than SCHEDULE_PATH_POINTS points goes into the schedule (and the picture)
+thinned: every k-th point and its last, k the smallest that leaves at most that many, and
+``path_thinned: {of_points: N, every: k}`` says so (the plan itself follows every point).
+A folder never mixes two runs: each file is written under a temporary name and renamed into
+place, and the previous run's picture is removed before the new schedule goes in.
 """
 
+import math
+import os
 import pathlib
 
 import numpy as np
+from tentacle_model.tentacle_spec import MAX_FILE_BYTES as MAX_TENTACLE_BYTES
+from tentacle_model.user_files import load_yaml, read_capped
+from tentacle_planner.errors import PlanInputError
 from tentacle_planner.planner import magnetisation_angles_deg, shape_rms, step_clearance
 import yaml
 
 FORMAT = 'tentacle-schedule/1'
+SCHEDULE_PATH_POINTS = 2000  # a path's points written out; a million took a minute to write
+OUTPUTS = ('schedule.yaml', 'plan.png')  # what a run writes into its folder
+
+
+def thinned(points, limit=SCHEDULE_PATH_POINTS):
+    """Return (points, k): every k-th of points (k, 3) and the last, at most limit of them."""
+    count = len(points)
+    if count <= limit:
+        return points, 1
+    every = math.ceil((count - 1) / (limit - 2))
+    index = np.arange(0, count, every)
+    return points[np.append(index, count - 1) if index[-1] != count - 1 else index], every
 
 
 def _floats(array, digits=9):
@@ -25,7 +48,10 @@ def _floats(array, digits=9):
 
 def planned_tentacle(result):
     """Return the tentacle file's document with the planned magnetisation directions."""
-    document = yaml.safe_load(pathlib.Path(result.scene.tentacle_file).read_text())
+    # The file the scene was validated from, read as strictly again (tentacle_spec).
+    data = read_capped(result.scene.tentacle_file, MAX_TENTACLE_BYTES, PlanInputError,
+                       'a tentacle file')
+    document = load_yaml(data.decode('utf-8'))
     for segment, direction in zip(document['segments'], result.plan.directions):
         if segment.get('magnetisation') and np.any(direction):
             segment['magnetisation']['direction'] = [round(float(v), 9) for v in direction]
@@ -52,6 +78,7 @@ def schedule_document(result):
             steps[-1]['clearance_m'] = round(step_clearance(scene, step)[0], 9)
     angles = magnetisation_angles_deg(plan.directions)
     magnetised = [i for i, d in enumerate(plan.directions) if np.any(d)]
+    path, every = thinned(scene.path.points_m)
 
     def robustness(rows):
         return [{'model': name, 'shape_rms_m': round(total, 9),
@@ -63,7 +90,9 @@ def schedule_document(result):
         'magnetisation_deg': [{'segment': i + 1, 'azimuth_deg': round(float(angles[i, 0]), 3),
                                'elevation_deg': round(float(angles[i, 1]), 3)}
                               for i in magnetised],
-        'path_m': _floats(scene.path.points_m),
+        'path_m': _floats(path),
+        **({'path_thinned': {'of_points': len(scene.path.points_m), 'every': every}}
+           if every > 1 else {}),
         'steps': steps,
         'robustness': {'nominal_plan': robustness(result.robustness)},
         'flags': list(result.flags),
@@ -81,12 +110,49 @@ def schedule_document(result):
 
 def write_schedule(out_dir, result):
     """Write DIR/schedule.yaml and DIR/plan.png; return the schedule's path."""
+    path = write_schedule_file(out_dir, result)
+    write_plot(out_dir, result)
+    return path
+
+
+def write_schedule_file(out_dir, result):
+    """
+    Write DIR/schedule.yaml, replacing any previous run's outputs; return its path.
+
+    Written under a temporary name and renamed: an interruption leaves the previous run's
+    files as they were, or the new schedule alone (the previous picture removed first).
+    """
     out = pathlib.Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    text = yaml.safe_dump(schedule_document(result), sort_keys=False)
     path = out / 'schedule.yaml'
-    path.write_text(yaml.safe_dump(schedule_document(result), sort_keys=False))
-    plot_plan(result, out / 'plan.png')
+    _replace(path, lambda temporary: temporary.write_text(text))
     return path
+
+
+def write_plot(out_dir, result):
+    """Draw DIR/plan.png (under a temporary name, renamed when done); return its path."""
+    path = pathlib.Path(out_dir) / 'plan.png'
+    _replace(path, lambda temporary: plot_plan(result, temporary))
+    return path
+
+
+def clear_outputs(out_dir):
+    """Remove a previous run's OUTPUTS from a folder (nothing else in it)."""
+    for name in OUTPUTS:
+        (pathlib.Path(out_dir) / name).unlink(missing_ok=True)
+
+
+def _replace(path, write):
+    """Call write(temporary path) beside path, then rename it over path; clean up if not."""
+    temporary = path.with_name(f'.{path.name}.{os.getpid()}.tmp')
+    try:
+        write(temporary)
+        if path.name == OUTPUTS[0]:  # the new schedule: the old picture goes first
+            clear_outputs(path.parent)
+        os.replace(temporary, path)
+    finally:
+        temporary.unlink(missing_ok=True)
 
 
 def plot_plan(result, png_path):
@@ -108,7 +174,7 @@ def plot_plan(result, png_path):
         return f'{free * 1e3:.1f} mm free' if backbone else f'{step.inserted_m * 1e3:.0f} mm'
 
     fig, (shape_ax, field_ax) = plt.subplots(1, 2, figsize=(12, 5.5))
-    path = plane(scene.path.points_m)
+    path = plane(thinned(scene.path.points_m)[0])
     shape_ax.plot(path[:, 0], path[:, 1], 'k--', lw=1, label='path')
     for sphere in scene.obstacles:
         centre = plane(sphere.centre_m[None])[0]
@@ -158,9 +224,11 @@ def plot_plan(result, png_path):
     field_ax.set_title('field schedule' + (' (dense playback)' if result.playback_steps
                                            else ''), fontsize=9)
     field_ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(png_path, dpi=110)
-    plt.close(fig)
+    try:
+        fig.tight_layout()
+        fig.savefig(png_path, dpi=110, format='png')
+    finally:
+        plt.close(fig)
 
 
 def summary(result):
@@ -187,10 +255,11 @@ def summary(result):
     lines.append(f'  magnetisation{given} (azimuth, elevation in the link frame, deg): '
                  + ', '.join(f'{i + 1}: ({angles[i, 0]:.1f}, {angles[i, 1]:.1f})'
                              for i, d in enumerate(plan.directions) if np.any(d)))
-    worst = max(result.robustness, key=lambda row: row[2])
-    lines.append(f'  robustness: nominal {result.robustness[0][2] * 1e3:.3f} mm, worst '
-                 f'{worst[2] * 1e3:.3f} mm ({worst[0]})')
-    if result.robust_plan is not None:
+    if result.robustness:  # none when Ctrl-C left the report out
+        worst = max(result.robustness, key=lambda row: row[2])
+        lines.append(f'  robustness: nominal {result.robustness[0][2] * 1e3:.3f} mm, worst '
+                     f'{worst[2] * 1e3:.3f} mm ({worst[0]})')
+    if result.robust_plan is not None and result.robust_robustness:
         robust_worst = max(result.robust_robustness, key=lambda row: row[2])
         lines.append(f'  robust plan: nominal {result.robust_robustness[0][2] * 1e3:.3f} mm, '
                      f'worst {robust_worst[2] * 1e3:.3f} mm ({robust_worst[0]})')

@@ -207,13 +207,14 @@ def wire_report(outcome, rig, t0, refused=None):
         away, count = [], 0
         received = sets(rig, 0.0)  # one read of each log, not two per axis
         for n in 'xyz':
-            before = [v for t, v in received[n] if t < t_from]
-            previous = before[-1] if before else 0.0
+            before = [(t, v) for t, v in received[n] if t < t_from]
+            previous = before[-1] if before else (t_from, 0.0)
             for t, v in [(t, v) for t, v in received[n] if t_from <= t <= t_to]:
                 count += 1
-                if abs(v) > abs(previous) + 1e-9 or v * previous < 0.0:
-                    away.append((n, previous, v, f'{t - t0:+.3f} s'))
-                previous = v
+                if abs(v) > abs(previous[1]) + 1e-9 or v * previous[1] < 0.0:
+                    away.append((n, previous[1], v, f'{t - t0:+.3f} s after one at '
+                                                    f'{previous[0] - t0:+.3f} s'))
+                previous = (t, v)
         outcome.wire.append(f'{count} sets while refused, {len(away)} away from zero')
         outcome.check(not away, f'sets away from zero while refused ({t_from - t0:+.3f} to '
                                 f'{t_to - t0:+.3f} s): {away[:3]}')

@@ -67,8 +67,8 @@ def test_a_node_is_only_warned_of_an_unknown_name(tmp_path):
     ('colour_low:=[300,0,0]', r'-p colour_low: element 0 is 300, outside \[0, 255\]'),
     ('gains:=[1.0, -0.5]', r'-p gains: element 1 is -0.5, outside \[0, 10\]'),
     ('speed_m_per_s:=1.0', r'-p speed_m_per_s: 1.0 is outside \[0, 0.1\]'),
-    ('source:=1.5', "-p source: 1.5 is not str"),
-    ('source:=true', "-p source: True is not str"),
+    ('source:=1.5', '-p source: 1.5 is not str'),
+    ('source:=true', '-p source: True is not str'),
 ])
 def test_ros_args_out_of_range_or_wrong_type_are_refused(arg, message):
     with pytest.raises(ConfigError, match=message):

@@ -52,7 +52,7 @@ def test_devices_fifos_folders_and_large_files_are_refused_before_reading(tmp_pa
     assert read_text(bom, encoding='utf-8-sig') == 'a,b\n'
 
 
-COMMENTED = '''# WARNING: keep this line
+COMMENTED = """# WARNING: keep this line
 tracker_node:
   ros__parameters:
     base_px: [10.0, 20.0]   # the insertion point
@@ -64,7 +64,7 @@ tracker_node:
 coils_node:
   ros__parameters:
     max_current: 42.0   # ampere
-'''
+"""
 
 
 @pytest.mark.parametrize('text, node', [

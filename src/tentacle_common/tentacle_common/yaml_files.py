@@ -3,8 +3,8 @@ Params files on disk: read them bounded, parse them strictly, edit them line by 
 
 Plain code (no rclpy), for nodes and for the tools that run without ROS:
 
-- ``read_text`` refuses what is not a regular file (a FIFO would hang, /dev/zero would fill
-  memory) before opening it, and reads at most ``MAX_FILE_BYTES``.
+- ``read_text`` (and ``read_bytes``) refuse what is not a regular file (a FIFO would hang,
+  /dev/zero would fill memory) before opening it, and read at most ``MAX_FILE_BYTES``.
 - ``load`` parses YAML with ``StrictLoader``, which refuses a key given twice in one mapping
   (PyYAML keeps the last silently), naming the key and both lines.
 - ``set_flow_list`` puts ``key: [numbers]`` into a node's ``ros__parameters`` by editing only
@@ -57,14 +57,13 @@ class StrictLoader(yaml.SafeLoader):
         return super().construct_mapping(node, deep=deep)
 
 
-def read_text(path, max_bytes=MAX_FILE_BYTES, encoding='utf-8'):
+def read_bytes(path, max_bytes=MAX_FILE_BYTES):
     """
-    Return a regular file's text, refusing anything else before opening it.
+    Return a regular file's bytes, refusing anything else before opening it.
 
     :param max_bytes: larger files are refused
-    :param encoding: 'utf-8-sig' also drops a leading byte-order mark (Excel's CSV UTF-8)
-    :raises FileRefused: not a regular file, too large, or not valid text (the message says
-        which, without the path: the caller names the file)
+    :raises FileRefused: not a regular file, or too large (the message says which, without
+        the path: the caller names the file)
     :raises OSError: missing, unreadable
     """
     # stat before open: opening a serial device already toggles its DTR line, a FIFO blocks.
@@ -77,6 +76,18 @@ def read_text(path, max_bytes=MAX_FILE_BYTES, encoding='utf-8'):
         data = handle.read(max_bytes + 1)
     if len(data) > max_bytes:
         raise FileRefused(f'larger than {max_bytes} bytes')
+    return data
+
+
+def read_text(path, max_bytes=MAX_FILE_BYTES, encoding='utf-8'):
+    """
+    Return a regular file's text; see read_bytes.
+
+    :param encoding: 'utf-8-sig' also drops a leading byte-order mark (Excel's CSV UTF-8)
+    :raises FileRefused: not a regular file, too large, or not valid text
+    :raises OSError: missing, unreadable
+    """
+    data = read_bytes(path, max_bytes)
     try:
         return data.decode(encoding)
     except UnicodeDecodeError as exc:
@@ -221,10 +232,10 @@ def set_flow_list(text, node_name, key, values, per_line=None):
             if _content(lines[i]).strip() == f'{key}:':  # a block list, maybe indentless
                 end = max(end, _sequence_end(lines, i, child_indent))
             comment = ''
-            head = lines[i].rstrip('\n')
-            tail = head[head.rfind(']') + 1:] if end == i + 1 and ']' in head else ''
+            last = lines[end - 1].rstrip('\n')
+            tail = last[last.rfind(']') + 1:] if ']' in last else ''
             if tail.strip().startswith('#'):
-                comment = '  ' + tail.strip()  # the comment after a one-line list stays
+                comment = '  ' + tail.strip()  # the comment after the list stays
             lines[i:end] = [new + comment + '\n']
         else:
             lines[p_end:p_end] = [new + '\n']

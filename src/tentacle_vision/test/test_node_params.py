@@ -1,6 +1,8 @@
 """The vision nodes' parameters as a lab writes them: checked before rclpy starts, exit 2."""
 
 import os
+import threading
+import time
 
 import pytest
 import rclpy
@@ -12,8 +14,25 @@ from tentacle_vision import camera_node, tracker_node
 from tentacle_vision.params import CAMERA_NODE, CAMERA_PARAMS
 
 
-def refused(capsys, main, argv):
+def unblock_later(fifo, after_s=5.0):
+    """Open a FIFO's writing end after a while and close it: a reader that blocked returns."""
+    def writer():
+        deadline = time.monotonic() + after_s + 5.0
+        time.sleep(after_s)
+        while time.monotonic() < deadline:
+            try:  # non-blocking: fails at once while nobody reads (the right behaviour)
+                os.close(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
+                return
+            except OSError:
+                time.sleep(0.1)
+    threading.Thread(target=writer, daemon=True).start()
+
+
+def refused(capsys, monkeypatch, main, argv):
     """Return the stderr of a node's main that must exit 2 before starting."""
+    def started(*_args, **_kwargs):  # a refusal that comes too late must not spin forever
+        raise RuntimeError('rclpy.init reached: the arguments were not refused before it')
+    monkeypatch.setattr(rclpy, 'init', started)
     with pytest.raises(SystemExit) as stopped:
         main(argv)
     err = capsys.readouterr().err
@@ -37,14 +56,16 @@ CASES = [
 
 
 @pytest.mark.parametrize('args, message', CASES)
-def test_tracker_node_refuses_before_starting(tmp_path, capsys, args, message):
+def test_tracker_node_refuses_before_starting(tmp_path, capsys, monkeypatch, args, message):
     os.mkfifo(tmp_path / 'fifo.yaml')
+    if 'fifo' in args[-1]:
+        unblock_later(tmp_path / 'fifo.yaml')  # were the FIFO opened, the test still ends
     (tmp_path / 'big.yaml').write_text('#' * (1 << 21))
     (tmp_path / 'twice.yaml').write_text(
         'tracker_node:\n  ros__parameters:\n    threshold: 100\n    threshold: 120\n')
     (tmp_path / 'colour.yaml').write_text(
         'tracker_node:\n  ros__parameters:\n    colour_low: [300, 0, 0]\n')
-    err = refused(capsys, tracker_node.main,
+    err = refused(capsys, monkeypatch, tracker_node.main,
                   ['--ros-args'] + [a.format(d=tmp_path) for a in args])
     assert err.startswith('tracker_node: not started: ') and message in err, err
     assert 'Traceback' not in err
@@ -65,6 +86,6 @@ def test_camera_source_as_ros_reads_it_an_integer_is_a_device_index():
         rclpy.shutdown(context=context)
 
 
-def test_camera_node_refuses_a_non_integer_number_as_source(capsys):
-    err = refused(capsys, camera_node.main, ['--ros-args', '-p', 'source:=0.5'])
+def test_camera_node_refuses_a_non_integer_number_as_source(capsys, monkeypatch):
+    err = refused(capsys, monkeypatch, camera_node.main, ['--ros-args', '-p', 'source:=0.5'])
     assert '-p source: 0.5 is not str' in err

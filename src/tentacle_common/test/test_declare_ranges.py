@@ -28,7 +28,8 @@ def make(context, overrides=(), read_only=True):
     node = Node('range_node', context=context, parameter_overrides=[
         Parameter(name, value=value) for name, value in overrides])
     try:
-        return node, declare_parameters(node, TABLE, read_only=read_only)
+        return node, declare_parameters(node, TABLE, **({} if read_only else {
+            'read_only': False}))
     except BaseException:
         node.destroy_node()
         raise

@@ -36,7 +36,8 @@ def describe(params):
     """Return the table as text for ``--help``."""
     lines = []
     for p in params:
-        bounds = f' [{p.low:g}, {p.high:g}]' if p.low is not None else ''
+        bounds = (f' [{p.low:g}, {p.high:g}]' + (' each' if isinstance(p.default, list)
+                                                 else '')) if p.low is not None else ''
         lines.append(f'  {p.name} (default {p.default!r}){bounds}\n      {p.description}')
     return '\n'.join(lines)
 

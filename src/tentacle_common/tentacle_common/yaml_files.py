@@ -141,6 +141,11 @@ def _content(line):
     return '' if not stripped or stripped.startswith('#') else line.rstrip()
 
 
+def _bare(line):
+    """Return a line's text without indentation and a trailing `` # comment``."""
+    return _content(line).split(' #', 1)[0].strip()
+
+
 def _block_end(lines, start, indent):
     """Return the index after the block of lines deeper than ``indent`` after ``start``."""
     end = start + 1
@@ -175,7 +180,7 @@ def _find_key(lines, start, end, key, indent=None):
     for i in range(start, end):
         content = _content(lines[i])
         if content and (indent is None or _indent(lines[i]) == indent) and (
-                content.strip() == f'{key}:' or content.strip().startswith(f'{key}: ')
+                _bare(lines[i]) == f'{key}:' or content.strip().startswith(f'{key}: ')
                 or content.strip().startswith(f'{key}:[')):
             found.append(i)
     return found
@@ -202,7 +207,7 @@ def set_flow_list(text, node_name, key, values, per_line=None):
     if lines and not lines[-1].endswith('\n'):
         lines[-1] += '\n'
     sections = [i for i, line in enumerate(lines) if _content(line) and _indent(line) == 0
-                and _content(line).strip() in (f'{node_name}:', f'/{node_name}:')]
+                and _bare(line) in (f'{node_name}:', f'/{node_name}:')]
     if len(sections) > 1:
         raise FileRefused(f'{node_name} appears {len(sections)} times')
     if not sections:
@@ -214,7 +219,7 @@ def set_flow_list(text, node_name, key, values, per_line=None):
         top = sections[0]
         top_end = _block_end(lines, top, 0)
         params = _find_key(lines, top + 1, top_end, 'ros__parameters')
-        if len(params) != 1 or _content(lines[params[0]]).strip() != 'ros__parameters:':
+        if len(params) != 1 or _bare(lines[params[0]]) != 'ros__parameters:':
             raise FileRefused(f'{node_name} has no block-style ros__parameters')
         p = params[0]
         p_indent = _indent(lines[p])
@@ -229,7 +234,7 @@ def set_flow_list(text, node_name, key, values, per_line=None):
         if found:
             i = found[0]
             end = _block_end(lines, i, child_indent)
-            if _content(lines[i]).strip() == f'{key}:':  # a block list, maybe indentless
+            if _bare(lines[i]) == f'{key}:':  # a block list, maybe indentless
                 end = max(end, _sequence_end(lines, i, child_indent))
             comment = ''
             last = lines[end - 1].rstrip('\n')

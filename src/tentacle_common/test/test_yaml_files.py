@@ -72,6 +72,8 @@ coils_node:
     (COMMENTED.replace('    homography: [1.0, 0.0, 0.0,\n                 0.0, 1.0, 0.0,\n'
                        '                 0.0, 0.0, 1.0]   # fitted\n', ''), 'tracker_node'),
     (COMMENTED, 'camera_node'),
+    (COMMENTED.replace('tracker_node:\n  ros__parameters:\n', 'tracker_node:  # bench 2\n'
+                       '  ros__parameters:   # as fitted\n'), 'tracker_node'),
     (yaml.safe_dump({'tracker_node': {'ros__parameters': {'homography': [0.5] * 9,
                                                           'dark': True}}}), 'tracker_node'),
 ])

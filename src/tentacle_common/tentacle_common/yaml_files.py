@@ -175,7 +175,7 @@ def _sequence_end(lines, start, indent):
 
 
 def _find_key(lines, start, end, key, indent=None):
-    """Return the index of ``key:`` among lines[start:end] at the shallowest indent."""
+    """Return the indices of the ``key:`` lines among lines[start:end] (at ``indent``)."""
     found = []
     for i in range(start, end):
         content = _content(lines[i])
@@ -260,9 +260,11 @@ def _with_value(document, node_name, key, value):
     """Return a deep copy of a params document with one value set (the section made)."""
     document = copy.deepcopy(document)
     name = f'/{node_name}' if f'/{node_name}' in document else node_name
-    section = document.setdefault(name, {}) or {}
+    section = document.get(name) or {}
+    params = section.get('ros__parameters') or {} if isinstance(section, dict) else None
+    if not isinstance(params, dict):
+        raise FileRefused(f'its {name} section is not a ros__parameters mapping')
     document[name] = section
-    params = section.setdefault('ros__parameters', {}) or {}
     section['ros__parameters'] = params
     params[key] = value
     return document

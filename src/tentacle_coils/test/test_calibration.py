@@ -1,6 +1,7 @@
 """Calibration fit against a known matrix, and the file handling around it."""
 
 import shutil
+import subprocess
 
 import numpy as np
 import pytest
@@ -78,3 +79,98 @@ def test_command_line_writes_config_keeping_comments(tmp_path, capsys):
     np.testing.assert_allclose(amap.matrix, TRUE_A, rtol=1e-6, atol=1e-12)
     np.testing.assert_allclose(amap.offset, TRUE_B0, rtol=1e-6, atol=1e-12)
     assert main([str(tmp_path / 'missing.csv')]) == 2
+
+
+def csv_text(columns=COLUMNS, extra=None, n=40):
+    """Return a measurements CSV; extra = (column name, values function of the row)."""
+    currents, fields = measurements(n)
+    by_name = dict(zip(COLUMNS, np.column_stack([currents, fields]).T))
+    names = list(columns) + ([extra[0]] if extra else [])
+    rows = [[by_name[c][k] if c in by_name else 0.0 for c in columns]
+            + ([extra[1](k)] if extra else []) for k in range(n)]
+    return ','.join(names) + '\n' + ''.join(
+        ','.join(f'{v:.9g}' for v in row) + '\n' for row in rows)
+
+
+def scaled_x(text, factor):
+    lines = text.splitlines()
+    out = [lines[0]]
+    for line in lines[1:]:
+        v = line.split(',')
+        v[3] = f'{float(v[3]) * factor:.9g}'
+        out.append(','.join(v))
+    return '\n'.join(out) + '\n'
+
+
+GOOD = csv_text()
+# (CSV bytes, extra arguments, the exit status, a piece of the message or report)
+CLI_CASES = [
+    ('repeated field_x_t', csv_text(extra=('field_x_t', lambda k: 0.0)).encode(), [], 2,
+     'column field_x_t given 2 times (columns 4, 7); each must be given once'),
+    ('zero x field', scaled_x(GOOD, 0.0).encode(), [], 2,
+     'singular or ill-conditioned: condition number'),
+    ('weak x field', scaled_x(GOOD, 1e-3).encode(), [], 2,
+     'ill-conditioned: condition number 2.02e+03, limit 100'),
+    ('weak x, limit raised', scaled_x(GOOD, 1e-3).encode(), ['--max-condition', '1e4'], 0,
+     'diagonal (mT/A): x 0.0005'),
+    ('latin-1 byte', GOOD.replace('current_x_a', 'current_x_a\xe9', 1).encode('latin-1'), [],
+     2, 'not UTF-8 text (byte 0xe9 at offset 11); save it as "CSV UTF-8"'),
+    ('excel BOM', b'\xef\xbb\xbf' + GOOD.encode(), [], 0, 'diagonal (mT/A): x 0.5300'),
+    ('columns reordered, extra column', csv_text(COLUMNS[::-1], ('time_s', float)).encode(),
+     [], 0, 'diagonal (mT/A): x 0.5300'),
+    ('missing column', csv_text(COLUMNS[:5]).encode(), [], 2, 'missing column(s) field_z_t'),
+    ('row too long', (GOOD + '1,2,3,4,5,6,7\n').encode(), [], 2,
+     ':42: 7 fields where the header has 6'),
+    ('bad number', GOOD.replace('\n', '\n1,2,x,1e-3,2e-3,3e-3\n', 1).encode(), [], 2,
+     ":2: not a number in column current_z_a: 'x'"),
+    ('bad max-condition', GOOD.encode(), ['--max-condition', '0.5'], 2, 'at least 1'),
+]
+
+
+@pytest.mark.parametrize('name, data, extra, status, message', CLI_CASES,
+                         ids=[c[0] for c in CLI_CASES])
+def test_command_line_cases_and_a_refused_fit_is_never_written(
+        tmp_path, capsys, name, data, extra, status, message):
+    csv_path = tmp_path / 'm.csv'
+    csv_path.write_bytes(data)
+    config = tmp_path / 'coils.yaml'
+    shutil.copy('config/coils.yaml', config)
+    before = config.read_text()
+    if status == 2 and extra and extra[0] == '--max-condition':
+        with pytest.raises(SystemExit) as usage:  # argparse's own usage error
+            main([str(csv_path), *extra])
+        assert usage.value.code == 2 and message in capsys.readouterr().err
+        return
+    assert main([str(csv_path), '--write', str(config), *extra]) == status
+    out, err = capsys.readouterr()
+    assert message in (out if status == 0 else err), out + err
+    if status == 2:
+        assert err.startswith(f'calibrate_coils: {csv_path}:')
+        assert config.read_text() == before  # nothing written
+        assert 'Traceback' not in err
+    else:
+        assert config.read_text() != before
+
+
+@pytest.mark.parametrize('target, message', [
+    ('folder', 'not a regular file'),
+    ('/dev/zero', 'not a regular file'),
+    ('missing.yaml', 'cannot be read: No such file or directory'),
+    ('other.yaml', 'no coils_node section (is this the coils params file?)'),
+])
+def test_write_targets_that_are_refused(tmp_path, capsys, target, message):
+    csv_path = tmp_path / 'm.csv'
+    csv_path.write_text(GOOD)
+    (tmp_path / 'folder').mkdir()
+    (tmp_path / 'other.yaml').write_text('# mine\ntracker_node:\n  ros__parameters: {}\n')
+    path = target if target.startswith('/') else str(tmp_path / target)
+    assert main([str(csv_path), '--write', path]) == 2
+    assert f'calibrate_coils: {path}: {message}' in capsys.readouterr().err
+    assert (tmp_path / 'other.yaml').read_text().startswith('# mine\n')
+
+
+def test_help_works_without_a_sourced_workspace():
+    # As a lab user runs it: a fresh shell, no setup.bash, no PYTHONPATH.
+    done = subprocess.run(['scripts/calibrate_coils', '--help'], capture_output=True,
+                          text=True, timeout=60, env={'PATH': '/usr/bin:/bin'})
+    assert done.returncode == 0 and 'usage: calibrate_coils' in done.stdout, done.stderr

@@ -18,24 +18,53 @@ import tempfile
 import threading
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                SetParametersResult)
 import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 from tentacle_common.errors import ConfigError, DriverError
-from tentacle_common.params import check_ros_args, describe
+from tentacle_common.params import check_ros_args, describe, out_of_range
 import yaml
 
 LEVELS = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN,
           'error': DiagnosticStatus.ERROR}
 
 
-def declare_parameters(node, table):
-    """Declare every row of a parameter table with a descriptor; return {name: value}."""
+def list_range_check(table):
+    """
+    Return an on-set-parameters callback refusing a list element outside its row's range.
+
+    rcl's descriptor ranges apply to scalars only; rclpy runs this callback at declare time
+    (a refused override raises InvalidParameterValueException) and on every later set.
+    """
+    ranged = {p.name: p for p in table if p.low is not None and isinstance(p.default, list)}
+
+    def check(parameters):
+        for parameter in parameters:
+            p = ranged.get(parameter.name)
+            problem = out_of_range(p, list(parameter.value)) if p is not None else ''
+            if problem:
+                return SetParametersResult(successful=False, reason=f'{p.name}: {problem}')
+        return SetParametersResult(successful=True)
+    return check
+
+
+def declare_parameters(node, table, read_only=True):
+    """
+    Declare every row of a parameter table with a descriptor; return {name: value}.
+
+    Ranges hold for scalars (the descriptor's) and for each element of a list
+    (``list_range_check``), at declare time and on any set.
+
+    :param read_only: the drivers' parameters are fixed for the node's life
+    :raises rclpy.exceptions.ParameterException: a value rcl or the range check refuses
+    """
+    node.add_on_set_parameters_callback(list_range_check(table))
     values = {}
     for p in table:
-        descriptor = ParameterDescriptor(description=p.description, read_only=True)
+        descriptor = ParameterDescriptor(description=p.description, read_only=read_only)
         if p.low is not None and isinstance(p.default, float):
             descriptor.floating_point_range = [FloatingPointRange(
                 from_value=float(p.low), to_value=float(p.high), step=0.0)]

@@ -4,17 +4,20 @@ Parameter tables: one row per parameter (name, default, range, unit in the descr
 Plain data (no rclpy): a node declares every row with a descriptor (driver_node.py),
 ``--help`` prints the table (``describe``), and what a lab writes in a params file or with
 ``-p`` is checked against it before rcl reads it (``check_ros_args``): integers given for
-doubles are converted (rcl refuses 40 for a double, and a sequence mixing 0 and 0.53e-3), a
-misspelt name is warned about with a suggestion, and a value of the wrong type is an error
-naming the file and the parameter.
+doubles are converted (rcl refuses 40 for a double, and a sequence mixing 0 and 0.53e-3), an
+integer given for text becomes its digits (ROS reads ``source:=0`` as an integer), a misspelt
+name is warned about with a suggestion, and a value of the wrong type or out of its range
+(each element of a list) is an error naming the file and the parameter. A tool without ROS
+(``resolve``) refuses a misspelt name outright. Params files are read bounded and parsed
+strictly (tentacle_common.yaml_files: no device or FIFO, no key given twice).
 """
 
 from dataclasses import dataclass
 import difflib
 import json
-import pathlib
 
 from tentacle_common.errors import ConfigError
+from tentacle_common.yaml_files import FileRefused, load, read_text
 import yaml
 
 
@@ -33,7 +36,8 @@ def describe(params):
     """Return the table as text for ``--help``."""
     lines = []
     for p in params:
-        bounds = f' [{p.low:g}, {p.high:g}]' if p.low is not None else ''
+        bounds = (f' [{p.low:g}, {p.high:g}]' + (' each' if isinstance(p.default, list)
+                                                 else '')) if p.low is not None else ''
         lines.append(f'  {p.name} (default {p.default!r}){bounds}\n      {p.description}')
     return '\n'.join(lines)
 
@@ -71,6 +75,8 @@ def _coerce(p, value):
     def exact(kind, v):
         if kind is float:
             return as_double(v)
+        if kind is str and type(v) is int:
+            return str(v)  # a device index or a number-like name, as ROS parsed it
         if type(v) is not kind:  # bool is an int in Python, not in ROS
             raise ValueError(f'{v!r} is not {"an integer" if kind is int else kind.__name__}')
         return v
@@ -80,6 +86,32 @@ def _coerce(p, value):
             raise ValueError(f'{value!r} is not a list')
         return [exact(type(p.default[0]), v) for v in value]
     return exact(type(p.default), value)
+
+
+def out_of_range(p, value):
+    """Return why a (coerced) value is outside p's bounds, each element of a list; or ''."""
+    if p.low is None:
+        return ''
+    bounds = f'[{p.low:g}, {p.high:g}]'
+    if isinstance(value, list):
+        for i, v in enumerate(value):
+            if not p.low <= v <= p.high:
+                return f'element {i} is {v!r}, outside {bounds}'
+        return ''
+    return '' if p.low <= value <= p.high else f'{value!r} is outside {bounds}'
+
+
+def checked(p, value):
+    """
+    Return value coerced to p's type and within p's bounds (each element of a list).
+
+    :raises ValueError: the wrong type, or out of range; the message says which
+    """
+    value = _coerce(p, value)
+    problem = out_of_range(p, value)
+    if problem:
+        raise ValueError(problem)
+    return value
 
 
 def _suggestion(name, table):
@@ -95,24 +127,26 @@ def _own_section(section, node_name):
     return 'all' if name in ('**', '*') else ''
 
 
-def check_params_file(path, node_name, table):
+def check_params_file(path, node_name, table, unknown='warn'):
     """
     Read a ROS params file and check this node's parameters in it against the table.
 
+    :param unknown: 'warn' (a node: rcl ignores the name, the node logs the warning) or
+        'refuse' (a tool: a misspelt name is an error, with the nearest known name)
     :return: (the document, with integers in double parameters made doubles; warnings, one
         per unknown parameter in this node's section; whether anything was converted)
-    :raises ConfigError: the file is missing, unreadable or not a params file, or a
-        parameter has a value of the wrong type; the message names the file and parameter
+    :raises ConfigError: the file is missing, unreadable, not a regular file, larger than
+        tentacle_common.yaml_files.MAX_FILE_BYTES or not a params file, gives a key twice, or
+        a parameter has a value of the wrong type or out of range; the message names the file
+        and the parameter
     """
     try:
-        text = pathlib.Path(path).read_text(encoding='utf-8')
-    except (OSError, UnicodeDecodeError) as exc:
+        document = load(read_text(path))
+    except OSError as exc:
         raise ConfigError(f'params file {path}: cannot be read: '
-                          f'{getattr(exc, "strerror", None) or exc}') from None
-    try:
-        document = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ConfigError(f'params file {path}: not YAML: {exc}') from None
+                          f'{exc.strerror or exc}') from None
+    except FileRefused as exc:
+        raise ConfigError(f'params file {path}: {exc}') from None
     if not isinstance(document, dict):
         raise ConfigError(f'params file {path}: not a mapping of node names to '
                           'ros__parameters')
@@ -128,12 +162,15 @@ def check_params_file(path, node_name, table):
         for name, value in params.items():
             p = by_name.get(name)
             if p is None:
+                if kind == 'node' and unknown == 'refuse':
+                    raise ConfigError(f'params file {path}: {name} is not a {node_name} '
+                                      f'parameter{_suggestion(name, table)}')
                 if kind == 'node':
                     warnings.append(f'params file {path}: {name} is not a {node_name} '
                                     f'parameter{_suggestion(name, table)}: ignored')
                 continue
             try:
-                coerced = _coerce(p, value)
+                coerced = checked(p, value)
             except ValueError as exc:
                 raise ConfigError(f'params file {path}: {name}: {exc}') from None
             if coerced != value or type(coerced) is not type(value) or (
@@ -177,7 +214,7 @@ def check_ros_args(argv, node_name, table):
                                 f'{_suggestion(name, table)}: ignored')
                 continue
             try:
-                value = _coerce(by_name[name], yaml.safe_load(text))
+                value = checked(by_name[name], yaml.safe_load(text))
             except (ValueError, yaml.YAMLError) as exc:
                 raise ConfigError(f'-p {name}: {exc}') from None
             argv[i + 1] = f'{owner + ":" if owner else ""}{name}:=' + json.dumps(value)
@@ -189,15 +226,16 @@ def resolve(table, node_name, params_file=None, overrides=None):
     Return {name: value} as a node would get them, for a tool that runs without ROS.
 
     Defaults, then this node's section of a params file, then ``overrides``; each value is
-    checked against its row's type and range.
+    checked against its row's type and range (each element of a list).
 
-    :raises ConfigError: a bad file, an unknown override, or a value of the wrong type or out
-        of range, named
+    :raises ConfigError: a bad file, an unknown name in this node's section or in the
+        overrides (the nearest known name suggested), or a value of the wrong type or out of
+        range, named
     """
     by_name = {p.name: p for p in table}
     values = {p.name: p.default for p in table}
     if params_file is not None:
-        document, _, _ = check_params_file(params_file, node_name, table)
+        document, _, _ = check_params_file(params_file, node_name, table, unknown='refuse')
         for section, body in document.items():
             if _own_section(section, node_name):
                 values.update({k: v for k, v in body['ros__parameters'].items()
@@ -206,11 +244,11 @@ def resolve(table, node_name, params_file=None, overrides=None):
         if name not in by_name:
             raise ConfigError(f'{name}: not a {node_name} parameter{_suggestion(name, table)}')
         try:
-            values[name] = _coerce(by_name[name], value)
+            values[name] = checked(by_name[name], value)
         except ValueError as exc:
             raise ConfigError(f'{name}: {exc}') from None
     for name, value in values.items():
-        p = by_name[name]
-        if p.low is not None and not p.low <= value <= p.high:
-            raise ConfigError(f'{name}: {value!r} is outside [{p.low:g}, {p.high:g}]')
+        problem = out_of_range(by_name[name], value)
+        if problem:  # a default outside its own row's range: the table is wrong
+            raise ConfigError(f'{name}: {problem}')
     return values

@@ -132,4 +132,4 @@ def test_calibrate_camera_writes_the_homography_into_the_params_file(tmp_path):
     assert np.allclose(fitted.to_metres(px), expected.to_metres(px), atol=2e-5)
     bad = subprocess.run([str(ROOT / 'scripts' / 'calibrate_camera'), str(params),
                           '--square-mm', '2'], capture_output=True, text=True, timeout=60)
-    assert bad.returncode == 1 and 'is not an image' in bad.stderr
+    assert bad.returncode == 2 and 'is not an image' in bad.stderr

@@ -41,8 +41,8 @@ import rclpy  # noqa: E402
 
 from tentacle_coils.field_map import ActuationMap  # noqa: E402
 from tentacle_coils.params import REFERENCE_MATRIX_T_PER_A  # noqa: E402
+from tentacle_common.waiting import wait_for  # noqa: E402
 from tentacle_sim.sim_rig import CoilRig  # noqa: E402
-from tentacle_sim.waiting import wait_for  # noqa: E402
 
 HELD_A = np.array([15.0, -15.0, 15.0])
 BOUND_S = 1.5

@@ -13,7 +13,7 @@ import os
 import pathlib
 import threading
 
-from tentacle_sim.waiting import wait_for  # noqa: F401 (the tests take it from here)
+from tentacle_common.waiting import wait_for  # noqa: F401 (the tests take it from here)
 
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent

@@ -56,6 +56,6 @@ def test_test_modules_have_unique_names():
     # The test folders are not packages: pytest imports each test module by its basename, so
     # two of one name fail the whole collection (make test stops before the first test).
     seen = {}
-    for path in sorted(ROOT.glob('src/*/test/test_*.py')) + sorted(ROOT.glob('tests/test_*.py')):
+    for path in sorted([*ROOT.glob('src/*/test/test_*.py'), *ROOT.glob('tests/**/test_*.py')]):
         seen.setdefault(path.name, []).append(str(path.relative_to(ROOT)))
     assert {name: paths for name, paths in seen.items() if len(paths) > 1} == {}

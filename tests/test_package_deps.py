@@ -30,11 +30,6 @@ IMPORT_KEYS = {  # import name -> rosdep key
                             'geometry_msgs', 'sensor_msgs', 'nav_msgs', 'diagnostic_msgs',
                             'ament_index_python')},
 }
-# Test imports that cannot be declared: tentacle_sim's emulators run tentacle_coils' and
-# tentacle_inserter's codecs (exec_depend), so a test_depend back on tentacle_sim would make
-# colcon's build order cyclic ("Unable to order packages topologically"). Their tests use the
-# emulators from the same source tree; moving those tests out of the packages ends this.
-UNDECLARABLE = {('tentacle_coils', 'tentacle_sim'), ('tentacle_inserter', 'tentacle_sim')}
 PACKAGES = sorted(p for p in (ROOT / 'src').iterdir() if (p / 'package.xml').exists())
 
 
@@ -88,8 +83,7 @@ def needed(package):
 def test_every_import_is_declared(package):
     run, test = declared(package)
     missing = sorted({(key, kind, where) for key, kind, where in needed(package)
-                      if key not in (run if kind == 'exec' else test)
-                      and (package.name, key) not in UNDECLARABLE},
+                      if key not in (run if kind == 'exec' else test)},
                      key=lambda m: (m[1], m[0]))
     first = {}
     for key, kind, where in missing:
@@ -97,14 +91,6 @@ def test_every_import_is_declared(package):
     assert not first, f'{package.name}/package.xml lacks:\n' + '\n'.join(
         f'  <{kind}_depend>{key}</{kind}_depend>  (imported at {where})'
         for (key, kind), where in first.items())
-
-
-def test_the_undeclarable_pairs_are_still_cyclic():
-    """Each exemption holds only while the other package runs this one's code."""
-    for package, other in UNDECLARABLE:
-        run, _ = declared(ROOT / 'src' / other)
-        assert package in run, f'{other} no longer needs {package}: declare {other} in ' \
-            f'{package}/package.xml and drop the exemption'
 
 
 def test_an_undeclared_import_is_found(tmp_path):

@@ -19,7 +19,7 @@ from tentacle_coils import dxkdp, scpi
 from tentacle_coils.coil_bank import Channel, CoilBank
 from tentacle_coils.supply import make_supply
 from tentacle_common.child_process import _ForwardLogs, Emitter
-from tentacle_sim.scripted_line import ScriptedLine
+from tentacle_common.scripted_line import ScriptedLine
 
 BAUD = 9600
 ACK = bytes((dxkdp.ACK,))

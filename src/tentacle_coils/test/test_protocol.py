@@ -14,7 +14,7 @@ from tentacle_coils import dxkdp, scpi
 from tentacle_coils.coil_bank import Channel
 from tentacle_coils.errors import SupplyFault
 from tentacle_coils.supply import make_supply
-from tentacle_sim.scripted_line import Exchange, ScriptedLine, ScriptError
+from tentacle_common.scripted_line import Exchange, ScriptedLine, ScriptError
 
 ACK, NAK = bytes((dxkdp.ACK,)), bytes((dxkdp.NAK,))
 BAUD = 9600

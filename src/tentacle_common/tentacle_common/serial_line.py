@@ -24,7 +24,7 @@ class SerialLine:
     Writes are paced at ``baud`` with at most one write queued behind the one on the line:
     commands that get no reply keep the line busy but never queue up stale ones. Any I/O
     failure raises LinkLost and closes the port. Drivers take every time from ``now()``, so
-    a scripted line with a virtual clock (tentacle_sim.scripted_line) can stand in for it.
+    a scripted line with a virtual clock (tentacle_common.scripted_line) can stand in for it.
     """
 
     def __init__(self, path, baud):

@@ -7,9 +7,9 @@ anything left over. The emulator shares the codec; these tests hold the driver t
 """
 
 import pytest
+from tentacle_common.scripted_line import Exchange, ScriptedLine, ScriptError
 from tentacle_inserter import stage, step1mm
 from tentacle_inserter.trapezoid import move_time_s
-from tentacle_sim.scripted_line import Exchange, ScriptedLine, ScriptError
 
 SPEED, ACCEL = 0.005, 0.5
 OK = b'ok\n'

@@ -1,7 +1,7 @@
 """wait_for on a virtual clock: a stalled poller still looks once more after its deadline."""
 
 import pytest
-from tentacle_sim import waiting
+from tentacle_common import waiting
 
 
 class StallingClock:

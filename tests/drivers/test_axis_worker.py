@@ -8,10 +8,10 @@ hand (``_step``) on a scripted line, so the order of loss, target and reconnect 
 import time
 
 import pytest
+from tentacle_common.scripted_line import Exchange, ScriptedLine
 from tentacle_common.serial_line import SerialLine
 from tentacle_inserter import stage, step1mm
 from tentacle_inserter.axis_worker import AxisWorker
-from tentacle_sim.scripted_line import Exchange, ScriptedLine
 from tentacle_sim.stage_emulator import GcodeStage
 
 SPEED, ACCEL = 0.01, 0.5

@@ -25,11 +25,10 @@ EXECUTABLES = {  # DESIGN.md, "Packages" ('-': a package without executables)
     'tentacle_vision': ['camera_node', 'tracker_node'],
     'tentacle_model': ['tentacle-statics'],
     'tentacle_planner': ['tentacle-plan', 'player_node'],
-    'tentacle_sim': ['sim_node', 'supply_emulator'],
+    'tentacle_sim': ['sim_node', 'supply_emulator', 'stage_emulator'],
 }
 MORE_EXECUTABLES = {  # ours beyond DESIGN.md's table
     'tentacle_coils': ['calibrate_coils'],
-    'tentacle_sim': ['stage_emulator'],
     'tentacle_vision': ['calibrate_camera'],
 }
 COLCON = str(pathlib.Path(sys.executable).parent / 'colcon')

@@ -41,20 +41,12 @@ import rclpy  # noqa: E402
 
 from tentacle_coils.field_map import ActuationMap  # noqa: E402
 from tentacle_coils.params import REFERENCE_MATRIX_T_PER_A  # noqa: E402
+from tentacle_common.child_process import child_pids  # noqa: E402
 from tentacle_common.waiting import wait_for  # noqa: E402
 from tentacle_sim.sim_rig import CoilRig  # noqa: E402
 
 HELD_A = np.array([15.0, -15.0, 15.0])
 BOUND_S = 1.5
-
-
-def children(pid):
-    """Return the pids a process has started (from every thread), read from /proc."""
-    pids = []
-    for task in os.listdir(f'/proc/{pid}/task'):
-        with open(f'/proc/{pid}/task/{task}/children') as handle:
-            pids += [int(p) for p in handle.read().split()]
-    return pids
 
 
 def one_run(node, kill_spare):
@@ -83,7 +75,7 @@ def one_run(node, kill_spare):
                             10.0):
                 raise RuntimeError(f'field not reached: {rig.emulators.setpoints()}')
             time.sleep(2.0)  # the spare has imported and waits for its config
-            pids = children(rig.node.popen.pid)
+            pids = child_pids(rig.node.popen.pid)
             targets = pids if kill_spare else _bank_pid(rig, pids)
             streaming.clear()  # the dead bank would refuse nothing; the new one is disabled
             t_kill = time.monotonic()

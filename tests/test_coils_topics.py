@@ -14,6 +14,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 import pytest
 from rig_support import wait_for
+from tentacle_common.child_process import child_pids
 
 pytestmark = pytest.mark.ros
 
@@ -345,15 +346,6 @@ def test_a_killed_bank_process_is_replaced_and_the_coils_are_zero_and_off(coil_r
     assert drive(emulators, probe, [1e-3, 1e-3, 1e-3])
 
 
-def children(pid):
-    """Return the pids a process has started (from every thread), read from /proc."""
-    pids = []
-    for task in os.listdir(f'/proc/{pid}/task'):
-        with open(f'/proc/{pid}/task/{task}/children') as handle:
-            pids += [int(p) for p in handle.read().split()]
-    return pids
-
-
 def test_the_bank_and_its_spare_killed_together_leave_the_coils_zero_and_off(coil_rig, probe):
     # Every child process of coils_node is killed while a field is held: no process was left
     # to zero the supplies, and none was started.
@@ -363,7 +355,7 @@ def test_the_bank_and_its_spare_killed_together_leave_the_coils_zero_and_off(coi
     assert wait_for(lambda: emulators.setpoints()[0] > 15.0)
     t0 = time.monotonic()
     assert wait_for(lambda: (bank_value(probe, 'spare_pid', t0) or ('none',))[0] != 'none')
-    pids = children(node.popen.pid)
+    pids = child_pids(node.popen.pid)
     assert len(pids) == 2, f'expected a bank and a spare, found {pids}'
     assert emulators.setpoints()[0] > 15.0 and all(emulators.outputs())  # still held
     for pid in pids:

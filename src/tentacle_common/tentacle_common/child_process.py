@@ -239,6 +239,15 @@ def spawn(module):
                             stdout=subprocess.PIPE, text=True, bufsize=1, env=env)
 
 
+def child_pids(pid):
+    """Return the pids of the processes ``pid`` started (from any of its threads), from /proc."""
+    pids = []
+    for task in os.listdir(f'/proc/{pid}/task'):
+        with open(f'/proc/{pid}/task/{task}/children') as handle:
+            pids += [int(p) for p in handle.read().split()]
+    return pids
+
+
 def end(popen):
     """Close a child's input (it stops safely) and wait; kill it if it hangs."""
     try:

@@ -14,6 +14,7 @@ import os
 import stat
 
 import numpy as np
+from tentacle_common.yaml_files import StrictLoader
 import yaml
 
 _KINDS = ((stat.S_ISDIR, 'a directory'), (stat.S_ISFIFO, 'a FIFO (named pipe)'),
@@ -52,30 +53,6 @@ def read_capped(path, limit_bytes, error, what):
             f'{limit_bytes // 1024} KiB'
         raise error(f'{path}: larger than {size}, the limit for {what}')
     return data
-
-
-class StrictLoader(yaml.SafeLoader):
-    """PyYAML's safe loader that refuses a mapping key given twice."""
-
-    def construct_mapping(self, node, deep=False):
-        """Return the mapping of node; raise ConstructorError on a repeated key."""
-        if isinstance(node, yaml.MappingNode):
-            seen = {}
-            for key_node, _ in node.value:
-                if key_node.tag == 'tag:yaml.org,2002:merge':
-                    continue  # a merge (<<) brings keys a later one may override
-                key = self.construct_object(key_node, deep=True)
-                try:
-                    first = seen.setdefault(key, key_node.start_mark)
-                except TypeError:  # an unhashable key: the base class says so
-                    break
-                if first is not key_node.start_mark:
-                    raise yaml.constructor.ConstructorError(
-                        'while constructing a mapping', node.start_mark,
-                        f'found the key {key!r} a second time (first on line '
-                        f'{first.line + 1}): each key may be given once',
-                        key_node.start_mark)
-        return super().construct_mapping(node, deep)
 
 
 def load_yaml(text):

@@ -39,6 +39,7 @@ sys.path.insert(0, str(HERE))
 from rig_support import ROOT, wait_for  # noqa: E402  (before rclpy: the private domain)
 
 from rig_probe import RigProbe  # noqa: E402,I100  (imports rclpy: after rig_support)
+from tentacle_sim.pty_device import UNAPPLIED_FAULTS  # noqa: E402
 from tentacle_sim.sim_rig import CoilRig  # noqa: E402
 
 SLEW_A_PER_S = 50.0
@@ -174,8 +175,11 @@ def all_zero(rig, off=False):
 
 def sets(rig, t0, t1=math.inf):
     """Return {axis: [(arrival s, current A)]} of the set requests applied from t0 to t1."""
+    # A request tagged with a fault the device still acts on (a late or garbled reply) was
+    # applied: leaving it out made the next set look like a step away from the one before.
     return {n: [(e['t'], e['current_a']) for e in rig.emulators.log(n, t0)
-                if 'current_a' in e and e['t'] <= t1 and 'fault' not in e] for n in 'xyz'}
+                if 'current_a' in e and e['t'] <= t1
+                and e.get('fault') not in UNAPPLIED_FAULTS] for n in 'xyz'}
 
 
 def fastest_change(entries, window_s=SLEW_WINDOW_S):

@@ -24,6 +24,7 @@ import time
 import tty
 
 POLL_S = 0.005  # how often the device thread looks for bytes, and for what it sends itself
+UNAPPLIED_FAULTS = ('no_reply', 'nak')  # a request with one of these is not acted on
 
 
 class PtyDevice:
@@ -31,6 +32,9 @@ class PtyDevice:
 
     FAULT_KINDS = ('no_reply', 'drop_reply', 'garble', 'late', 'disconnect')
     REQUEST_FAULTS = ('no_reply', 'drop_reply', 'nak', 'garble', 'late')  # in this order
+    # Faults that only touch the reply: a request with none (a SCPI set) is not theirs, so
+    # an armed one waits for the next request that is answered.
+    REPLY_FAULTS = ('drop_reply', 'garble', 'late')
 
     def __init__(self, name, *, baud=9600, link_path=None, delay_s=0.0005, log_path=None):
         """
@@ -71,6 +75,10 @@ class PtyDevice:
     def handle(self, request, apply):
         """Return (meaning for the log, reply bytes or None); act on it only if apply."""
         raise NotImplementedError
+
+    def answered(self, request):
+        """Return whether the device answers this request (reply faults need an answer)."""
+        return True
 
     def garble(self, reply):
         """Return the reply as a bad line would deliver it."""
@@ -158,6 +166,8 @@ class PtyDevice:
         with self._lock:
             armed = [(kind, self._faults.get(kind)) for kind in self.REQUEST_FAULTS]
         for kind, fault in armed:
+            if kind in self.REPLY_FAULTS and not self.answered(request):
+                continue
             if fault and fault[0] > 0 and self.matches(request, fault[2]):
                 with self._lock:
                     count, late_s, match = self._faults[kind]
@@ -235,7 +245,7 @@ class PtyDevice:
         if wait > 0:
             time.sleep(wait)  # the request's last byte has not crossed the line yet
         fault, late_s = self._take_fault(request)
-        meaning, reply = self.handle(request, apply=fault not in ('no_reply', 'nak'))
+        meaning, reply = self.handle(request, apply=fault not in UNAPPLIED_FAULTS)
         if fault:
             meaning['fault'] = fault
         self._record(request, arrived, meaning)

@@ -277,6 +277,10 @@ class Step1mmStage(PtyDevice):
         self.axis = _Axis(accel_m_s2, 1e6)
         self._state_lock = threading.Lock()
 
+    def answered(self, request):
+        """Return False: step1mm firmware answers nothing."""
+        return False
+
     def frame(self, buf):
         """Return ('request', 1): every byte is a command."""
         return 'request', 1

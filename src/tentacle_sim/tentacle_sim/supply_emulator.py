@@ -218,6 +218,10 @@ class ScpiSupply(SupplyModel):
             return ('drop', len(buf)) if len(buf) > 256 else ('wait', 0)
         return 'request', end + 1
 
+    def answered(self, request):
+        """Return whether the request is a query (SCPI answers queries only)."""
+        return request.rstrip(b'\r\n').split(b' ', 1)[0].endswith(b'?')
+
     def garble(self, reply):
         """Return a line of noise."""
         return _GARBLED_LINE

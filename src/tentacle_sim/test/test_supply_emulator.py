@@ -100,6 +100,24 @@ def test_scpi_session_and_error_queue(open_port):
     assert scpi.parse_error(exchange(fd, scpi.query_error())[0]) == scpi.NO_ERROR
 
 
+@pytest.mark.parametrize('kind', ['garble', 'late'])
+def test_a_reply_fault_waits_for_a_request_that_is_answered(open_port, kind):
+    # A SCPI set has no reply: a reply fault armed before it used to be spent on it (the set
+    # was applied, nothing was garbled, and the log tagged it as faulted).
+    emu, fd = open_port('scpi', baud=115200)
+    emu.inject(kind, count=1, late_s=0.2)
+    os.write(fd, scpi.set_current(1.5))
+    reply, elapsed = exchange(fd, scpi.query_setpoint(), timeout_s=0.5)
+    sets = [e for e in emu.log if e.get('command') == 'CURR']
+    assert sets and 'fault' not in sets[0] and emu.state()['setpoint_a'] == 1.5
+    assert [e.get('fault') for e in emu.log if e.get('command') == 'CURR?'] == [kind]
+    assert emu.pending_faults() == {}
+    if kind == 'late':
+        assert scpi.parse_float(reply) == 1.5 and elapsed >= 0.2
+    else:
+        assert reply != scpi.format_value(1.5)
+
+
 def test_disconnect_removes_the_port_then_restores_it_with_the_current_kept(open_port):
     emu, fd = open_port('dxkdp', baud=115200)
     exchange(fd, dxkdp.set_output(1, True), 1)

@@ -45,10 +45,13 @@ from tentacle_sim.sim_rig import CoilRig  # noqa: E402
 SLEW_A_PER_S = 50.0
 MATRIX = (0.53e-3, 1.07e-3, 0.65e-3)  # T/A, config/coils.yaml (diagonal)
 STREAM_HZ = 50.0
-# The emulators stamp each request's arrival when their thread reads it: a few ms late under
-# load. So the slew check here is over windows of 0.1 s or more (a few per cent of slack);
-# the exact check, set by set on a virtual clock, is src/tentacle_coils/test/test_protocol.py.
-JITTER_S = 2e-3
+# The emulators stamp each request's arrival when their thread reads it: late under load, by
+# a scheduler quantum or two with the second core busy (a 0.08 s exit ramp once measured 1.12
+# of the limit so: 11 ms of lateness on its first set). A late stamp on the earlier set of a
+# window shortens it, so the slew check here is over windows of 0.1 s or more with JITTER_S
+# of slack: a doubled rate still fails it. The exact check, set by set on a virtual clock,
+# is src/tentacle_coils/test/test_protocol.py.
+JITTER_S = 0.02
 SLEW_WINDOW_S = 0.1
 LOG_FORWARD_S = 0.05  # how late the node may stamp a line the bank process logged (s)
 COUNTERS = ('commands', 'updates', 'retries', 'timeouts')  # a supply's, in its diagnostics

@@ -51,3 +51,24 @@ def test_a_set_the_supply_refused_or_never_got_is_not_the_one_it_holds():
            curr(11.5, 3.1)]
     problems = refused_window(log)
     assert len(problems) == 1 and "('y', 3.0, 3.1," in problems[0]
+
+
+def ramp(rate_a_per_s, t0=10.0, start_a=4.0, dt_s=0.002):
+    """Return a ramp from start_a to zero at rate_a_per_s, one set every dt_s."""
+    steps = int(start_a / (rate_a_per_s * dt_s))
+    return [curr(t0 + k * dt_s, max(start_a - rate_a_per_s * dt_s * k, 0.0))
+            for k in range(steps + 1)]
+
+
+def slew_problems(y_log):
+    out = Outcome('test')
+    wire_report(out, Rig({'y': y_log}), t0=9.0)
+    return out.problems
+
+
+def test_the_slew_check_takes_a_late_stamp_and_still_catches_a_doubled_rate():
+    # The exit ramp's first set stamped 11 ms late under a busy core: within the limit.
+    late_first = ramp(50.0)
+    late_first[0]['t'] += 0.011
+    assert slew_problems(late_first) == []
+    assert slew_problems(ramp(100.0)) and slew_problems(ramp(100.0, dt_s=0.02))

@@ -1,11 +1,13 @@
 """
-Put every package under src/ on the import path, as a colcon --symlink-install would.
+Put every package under src/ on the import path, as a colcon --symlink-install would; give the
+processes tests start a working Ctrl-C.
 
 Both for this process (sys.path) and for the processes tests start (PYTHONPATH).
 """
 
 import os
 import pathlib
+import signal
 import sys
 
 ROOT = pathlib.Path(__file__).resolve().parent
@@ -13,3 +15,9 @@ SOURCES = [str(p) for p in sorted((ROOT / 'src').iterdir()) if (p / 'package.xml
 sys.path[:0] = [s for s in SOURCES if s not in sys.path]
 os.environ['PYTHONPATH'] = os.pathsep.join(
     SOURCES + [os.environ.get('PYTHONPATH', '')]).rstrip(os.pathsep)
+
+# A run started in the background (`make test &`, nohup, some CI runners) inherits SIGINT
+# ignored, and so would every process a test starts: Ctrl-C tests would then test nothing.
+# A handled signal is reset to its default at exec, so the children get a working Ctrl-C.
+if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)

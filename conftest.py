@@ -1,8 +1,8 @@
 """
-Put every package under src/ on the import path, as a colcon --symlink-install would; give the
-processes tests start a working Ctrl-C.
+Put every package under src/ on the import path, as a colcon --symlink-install would.
 
-Both for this process (sys.path) and for the processes tests start (PYTHONPATH).
+Both for this process (sys.path) and for the processes tests start (PYTHONPATH); and give
+those processes a working Ctrl-C.
 """
 
 import os

@@ -218,7 +218,11 @@ def child_main(build, logger_name, state_period_s=0.02):
     faulthandler.register(signal.SIGUSR1, all_threads=True)
     # Worker threads wake every few milliseconds; don't let them wait 5 ms for each other.
     sys.setswitchinterval(2e-4)
-    sys.exit(serve(build, logger_name, terminate=terminate, state_period_s=state_period_s))
+    code = serve(build, logger_name, terminate=terminate, state_period_s=state_period_s)
+    # Stopped and reported: a SIGTERM while the interpreter finalises (Python then restores
+    # the default disposition for its handlers) must not turn that into a kill.
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    sys.exit(code)
 
 
 # -- the node's side -------------------------------------------------------------------------

@@ -149,6 +149,18 @@ def ignore_further_signals(name):
         signal.signal(sig, already_stopping)
 
 
+def ignore_signals_to_exit():
+    """
+    Ignore SIGINT and SIGTERM at the OS level for the rest of the process: call once stopped.
+
+    Python resets its own handlers to the default while the interpreter finalises (rclpy's
+    and Fast DDS's teardown comes after), so a signal then would end a clean, confirmed stop
+    as a kill by that signal. SIG_IGN is the one disposition it leaves in place.
+    """
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)
+
+
 def spin_until_signal(node, poll_s=0.1):
     """
     Spin until SIGINT or SIGTERM (or the context ends); return the signal number or 0.
@@ -223,3 +235,4 @@ def run_node(argv, node_name, table, doc, make_node, stop_safely):
             print(f'{node_name}: {stop_safely(node)}', file=sys.stderr, flush=True)
             node.destroy_node()
         rclpy.try_shutdown()
+        ignore_signals_to_exit()

@@ -14,6 +14,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import threading
 
 import pytest
 from rig_support import ROOT  # noqa: F401 (a private ROS domain for the node below)
@@ -82,13 +83,21 @@ CHILD = HOLD + textwrap.dedent("""
 FINALISING = 'finalising, SIGTERM handler None'
 
 
-def started(script):
-    """Start ``script``; return (process, the write end of its finalisation hold)."""
+def started(script, limit_s=60.0):
+    """
+    Start ``script``; return (process, the write end of its finalisation hold).
+
+    The process is killed after limit_s whatever happens, so a read of its output that
+    waits for a line never waits for ever (it ends at the output's end, and fails).
+    """
     hold_read, hold_write = os.pipe()
     proc = subprocess.Popen([sys.executable, '-c', script, str(hold_read)], text=True,
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, pass_fds=[hold_read])
     os.close(hold_read)
+    limit = threading.Timer(limit_s, proc.kill)
+    limit.daemon = True
+    limit.start()
     return proc, hold_write
 
 

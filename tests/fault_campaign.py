@@ -52,6 +52,7 @@ STREAM_HZ = 50.0
 # of slack: a doubled rate still fails it. The exact check, set by set on a virtual clock,
 # is src/tentacle_coils/test/test_protocol.py.
 JITTER_S = 0.02
+ON_THE_LINE_S = 1.0  # how long before a fault is armed a request it takes can have arrived
 SLEW_WINDOW_S = 0.1
 LOG_FORWARD_S = 0.05  # how late the node may stamp a line the bank process logged (s)
 COUNTERS = ('commands', 'updates', 'retries', 'timeouts')  # a supply's, in its diagnostics
@@ -299,6 +300,23 @@ def dump_stacks(rig, t):
 
 
 # -- scenarios --------------------------------------------------------------------------------
+def faulted_then_next(log, armed_after, count):
+    """
+    Return (faulted requests, those after them) once count faulted ones have a successor.
+
+    None until then. A fault belongs to this scenario when the device served the request
+    after the scenario began (``served_t``), whenever that request arrived: one already on
+    the line when the fault was armed arrived before and is served after. Selecting by
+    arrival (``t``) missed it, and the scenario then waited for a faulted request that had
+    already come: the 'nothing reaches y for 5 s' failure (y was never silent).
+    """
+    faulted = [e for e in log if 'fault' in e and e['served_t'] >= armed_after]
+    if len(faulted) < count:
+        return None
+    after = [e for e in log if e['t'] > faulted[-1]['t']]
+    return (faulted, after) if after else None
+
+
 def transient(kind, **options):
     """Fault y for a few commands: retried, the stream keeps landing, no fault raised."""
     def run(rig, name):
@@ -309,12 +327,7 @@ def transient(kind, **options):
         count = options.get('count', 1)
 
         def log_after_faults():
-            log = rig.emulators.log('y', t0)
-            faulted = [e for e in log if 'fault' in e]
-            if len(faulted) < count:
-                return None
-            after = [e for e in log if e['t'] > faulted[-1]['t']]
-            return (faulted, after) if after else None
+            return faulted_then_next(rig.emulators.log('y', t0 - ON_THE_LINE_S), t0, count)
 
         waited = wait_for(lambda: log_after_faults() is not None)
         if not waited:
@@ -325,8 +338,8 @@ def transient(kind, **options):
                                f'{rig.node.output()[-12000:]}')
         faulted, after = log_after_faults()
         t_first = faulted[0]['t']
-        out.detect_s = next(e['t'] for e in rig.emulators.log('y', t0) if e['t'] > t_first) \
-            - t_first
+        out.detect_s = next(e['t'] for e in rig.emulators.log('y', t_first)
+                            if e['t'] > t_first) - t_first
         out.safe_s = 0.0  # nothing unsafe to undo: a command lands as sent, or not at all
         out.recover_s = after[0]['t'] - t_first
         out.check(rig.following(), 'the stream did not land again')

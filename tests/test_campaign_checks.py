@@ -1,6 +1,6 @@
 """The campaign's own checks on canned emulator logs: they flag what is wrong, and only that."""
 
-from fault_campaign import Outcome, wire_report
+from fault_campaign import faulted_then_next, Outcome, wire_report
 
 
 class Emulators:
@@ -72,3 +72,27 @@ def test_the_slew_check_takes_a_late_stamp_and_still_catches_a_doubled_rate():
     late_first[0]['t'] += 0.011
     assert slew_problems(late_first) == []
     assert slew_problems(ramp(100.0)) and slew_problems(ramp(100.0, dt_s=0.02))
+
+
+def test_a_fault_taken_by_a_request_already_on_the_line_counts():
+    # y's log from a cold run that 'received nothing for 5 s': the first garbled set arrived
+    # 0.04 ms before the scenario began (t0) and was served after the fault was armed.
+    t0 = 15312.3320
+    log = [curr(15312.3100, 3.10, served_t=15312.3110),
+           curr(15312.331957, 3.2025, served_t=15312.3335, fault='garble'),
+           curr(15312.350246, 3.2618, served_t=15312.3510, fault='garble'),
+           curr(15312.3703, 3.3100, served_t=15312.3710)]
+    faulted, after = faulted_then_next(log, t0, 2)
+    assert [e['current_a'] for e in faulted] == [3.2025, 3.2618]
+    assert [e['current_a'] for e in after] == [3.31]
+    # The log since t0 by arrival (as it was read before) holds one of the two: a wait for ever.
+    assert faulted_then_next([e for e in log if e['t'] >= t0], t0, 2) is None
+
+
+def test_an_earlier_scenarios_fault_does_not_count():
+    t0 = 20.0
+    log = [curr(19.5, 1.0, served_t=19.5, fault='garble'),   # the previous scenario's
+           curr(20.01, 1.1, served_t=20.011, fault='garble'),
+           curr(20.03, 1.2, served_t=20.031)]
+    assert faulted_then_next(log, t0, 2) is None
+    assert faulted_then_next(log, t0, 1)[0][0]['current_a'] == 1.1

@@ -234,7 +234,11 @@ class PtyDevice:
         del self._buf_t[:n]
 
     def _record(self, raw, arrived, meaning):
-        entry = {'t': arrived, 'port': self.name, 'hex': raw.hex(), **meaning}
+        # t: when the last byte arrived on the modelled line; served_t: when the device acted
+        # on it (and took an armed fault), which can be later: a request on the line when a
+        # fault is armed arrived before it and is served after it.
+        entry = {'t': arrived, 'served_t': time.monotonic(), 'port': self.name,
+                 'hex': raw.hex(), **meaning}
         self.log.append(entry)
         if self._log_file:
             self._log_file.write(json.dumps(entry) + '\n')

@@ -52,9 +52,9 @@ STREAM_HZ = 50.0
 # of slack: a doubled rate still fails it. The exact check, set by set on a virtual clock,
 # is src/tentacle_coils/test/test_protocol.py.
 JITTER_S = 0.02
-ON_THE_LINE_S = 1.0  # how long before a fault is armed a request it takes can have arrived
 SLEW_WINDOW_S = 0.1
 LOG_FORWARD_S = 0.05  # how late the node may stamp a line the bank process logged (s)
+ON_THE_LINE_S = 1.0  # how long before a fault is armed a request it takes can arrive (s)
 COUNTERS = ('commands', 'updates', 'retries', 'timeouts')  # a supply's, in its diagnostics
 
 

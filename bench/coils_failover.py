@@ -41,7 +41,9 @@ import rclpy  # noqa: E402
 
 from tentacle_coils.field_map import ActuationMap  # noqa: E402
 from tentacle_coils.params import REFERENCE_MATRIX_T_PER_A  # noqa: E402
+from tentacle_common import contract  # noqa: E402
 from tentacle_common.child_process import child_pids  # noqa: E402
+from tentacle_common.driver_node import publisher  # noqa: E402
 from tentacle_common.waiting import wait_for  # noqa: E402
 from tentacle_sim.sim_rig import CoilRig  # noqa: E402
 
@@ -51,9 +53,9 @@ BOUND_S = 1.5
 
 def one_run(node, kill_spare):
     """Hold the field, kill, return seconds from the kill to zero and off at every supply."""
-    pub = node.create_publisher(Vector3Stamped, '/coils/field_cmd', 10)
+    pub = publisher(node, contract.FIELD_CMD)
     msg = Vector3Stamped()
-    msg.header.frame_id = 'coils'
+    msg.header.frame_id = contract.COILS_FRAME
     msg.vector.x, msg.vector.y, msg.vector.z = (
         float(v) for v in ActuationMap(REFERENCE_MATRIX_T_PER_A).field(HELD_A))
     with tempfile.TemporaryDirectory() as workdir:

@@ -44,6 +44,8 @@ import rclpy  # noqa: E402
 from tentacle_coils.coil_bank import build_bank  # noqa: E402
 from tentacle_coils.field_map import ActuationMap  # noqa: E402
 from tentacle_coils.params import REFERENCE_MATRIX_T_PER_A  # noqa: E402
+from tentacle_common import contract  # noqa: E402
+from tentacle_common.driver_node import publisher  # noqa: E402
 from tentacle_sim.emulator_client import EmulatorProcess  # noqa: E402
 from tentacle_sim.sim_rig import CoilRig  # noqa: E402
 
@@ -58,9 +60,9 @@ class Commander:
     def __init__(self):
         """Create the node and publisher."""
         self.node = rclpy.create_node('coils_bench')
-        self.pub = self.node.create_publisher(Vector3Stamped, '/coils/field_cmd', 100)
+        self.pub = publisher(self.node, contract.FIELD_CMD, contract.Qos(100))
         self.msg = Vector3Stamped()
-        self.msg.header.frame_id = 'coils'
+        self.msg.header.frame_id = contract.COILS_FRAME
 
     def send(self, currents_a):
         """Publish the field that needs these currents; return the publish time (s)."""

@@ -32,6 +32,8 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 import rclpy  # noqa: E402
 from std_msgs.msg import Float64  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
+from tentacle_common import contract  # noqa: E402
+from tentacle_common.driver_node import client, publisher  # noqa: E402
 from tentacle_common.serial_line import SerialLine  # noqa: E402
 from tentacle_inserter import stage  # noqa: E402
 from tentacle_inserter.axis_worker import AxisWorker  # noqa: E402
@@ -82,19 +84,19 @@ def through_dds(dialect, link, folder):
             '-p', f'baud:={115200 if dialect == "gcode" else 9600}']
     node = NodeProcess(argv, str(pathlib.Path(folder) / f'{dialect}_node.log'))
     probe = rclpy.create_node('inserter_bench')
-    publisher = probe.create_publisher(Float64, '/inserter/target', 10)
-    home = probe.create_client(Trigger, '/inserter/home')
+    targets = publisher(probe, contract.axis_target('inserter'))
+    home = client(probe, contract.axis_service('inserter', 'home'))
     if not home.wait_for_service(timeout_sec=30.0):
         raise RuntimeError(f'inserter_node did not come up:\n{node.output()}')
     future = home.call_async(Trigger.Request())
     rclpy.spin_until_future_complete(probe, future, timeout_sec=20.0)
-    while publisher.get_subscription_count() == 0:
+    while targets.get_subscription_count() == 0:
         rclpy.spin_once(probe, timeout_sec=0.05)
 
     def close():
         probe.destroy_node()
         node.stop()
-    return (lambda target_m: publisher.publish(Float64(data=target_m))), close
+    return (lambda target_m: targets.publish(Float64(data=target_m))), close
 
 
 def measure(emu, send):

@@ -73,18 +73,18 @@ def track_times(frame, encoding):
 LATENCY_PROBE = """
 import sys, threading, time, json
 import numpy as np, rclpy
-from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import Image
-from tentacle_vision.tracker_node import image_qos
+from tentacle_common import contract
+from tentacle_common.driver_node import publisher, subscription
 frame = np.load(sys.argv[1])
 rclpy.init()
 node = rclpy.create_node('latency_probe')
-pub = node.create_publisher(Image, '/camera/image_raw', image_qos('reliable'))
+pub = publisher(node, contract.IMAGE)
 sent, got = {}, {}
-node.create_subscription(PoseStamped, '/vision/tip', lambda m: got.setdefault(
-    m.header.stamp.sec * 10**9 + m.header.stamp.nanosec, time.perf_counter()), 10)
+subscription(node, contract.VISION_TIP, lambda m: got.setdefault(
+    m.header.stamp.sec * 10**9 + m.header.stamp.nanosec, time.perf_counter()))
 threading.Thread(target=rclpy.spin, args=(node,), daemon=True).start()
-while pub.get_subscription_count() == 0 or node.count_publishers('/vision/tip') == 0:
+while pub.get_subscription_count() == 0 or node.count_publishers(contract.VISION_TIP.name) == 0:
     time.sleep(0.05)
 time.sleep(1.0)
 msg = Image(height=frame.shape[0], width=frame.shape[1], encoding='mono8',

@@ -29,6 +29,8 @@ import rclpy  # noqa: E402
 
 from tentacle_coils.field_map import ActuationMap  # noqa: E402
 from tentacle_coils.params import REFERENCE_MATRIX_T_PER_A  # noqa: E402
+from tentacle_common import contract  # noqa: E402
+from tentacle_common.driver_node import publisher, subscription  # noqa: E402
 from tentacle_sim.sim_rig import CoilRig  # noqa: E402
 
 
@@ -56,11 +58,9 @@ def main():
     rclpy.init()
     node = rclpy.create_node('coils_demo')
     latest = {}
-    node.create_subscription(Vector3Stamped, '/coils/currents',
-                             lambda m: latest.__setitem__('currents', m), 10)
-    node.create_subscription(Vector3Stamped, '/coils/field',
-                             lambda m: latest.__setitem__('field', m), 10)
-    pub = node.create_publisher(Vector3Stamped, '/coils/field_cmd', 10)
+    subscription(node, contract.CURRENTS, lambda m: latest.__setitem__('currents', m))
+    subscription(node, contract.FIELD, lambda m: latest.__setitem__('field', m))
+    pub = publisher(node, contract.FIELD_CMD)
     rows = []
     try:
         deadline = time.monotonic() + 20.0
@@ -81,7 +81,7 @@ def main():
             field = field_at(t, opts.amplitude_mt * 1e-3, opts.period_s, 3e-3)
             msg = Vector3Stamped()
             msg.header.stamp = node.get_clock().now().to_msg()
-            msg.header.frame_id = 'coils'
+            msg.header.frame_id = contract.COILS_FRAME
             msg.vector.x, msg.vector.y, msg.vector.z = (float(v) for v in field)
             pub.publish(msg)
             step_end = t0 + t + 1.0 / opts.rate
@@ -122,7 +122,7 @@ def hold_and_measure(node, pub, latest, field):
     while time.monotonic() < t_end:
         msg = Vector3Stamped()
         msg.header.stamp = node.get_clock().now().to_msg()
-        msg.header.frame_id = 'coils'
+        msg.header.frame_id = contract.COILS_FRAME
         msg.vector.x, msg.vector.y, msg.vector.z = (float(v) for v in field)
         pub.publish(msg)
         rclpy.spin_once(node, timeout_sec=0.05)

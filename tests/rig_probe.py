@@ -3,15 +3,15 @@
 import threading
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Vector3Stamped
 import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rig_support import Spinner
 from std_msgs.msg import Bool
 from std_srvs.srv import SetBool
+from tentacle_common import contract
+from tentacle_common.driver_node import client, publisher, subscription
 
 
 class RigProbe:
@@ -26,17 +26,13 @@ class RigProbe:
         self.currents = []
         self.fields = []
         self.diagnostics = []
-        self.field_pub = self.node.create_publisher(Vector3Stamped, '/coils/field_cmd', 10)
-        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.estop_pub = self.node.create_publisher(Bool, '/estop', latched)
-        self.node.create_subscription(Vector3Stamped, '/coils/currents',
-                                      lambda m: self._keep(self.currents, m), 10)
-        self.node.create_subscription(Vector3Stamped, '/coils/field',
-                                      lambda m: self._keep(self.fields, m), 10)
-        self.node.create_subscription(DiagnosticArray, '/diagnostics',
-                                      lambda m: self._keep(self.diagnostics, m), 10)
-        self.enable_client = self.node.create_client(SetBool, '/coils/enable')
+        self.field_pub = publisher(self.node, contract.FIELD_CMD)
+        self.estop_pub = publisher(self.node, contract.ESTOP)
+        subscription(self.node, contract.CURRENTS, lambda m: self._keep(self.currents, m))
+        subscription(self.node, contract.FIELD, lambda m: self._keep(self.fields, m))
+        subscription(self.node, contract.DIAGNOSTICS,
+                     lambda m: self._keep(self.diagnostics, m))
+        self.enable_client = client(self.node, contract.COILS_ENABLE)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.spinner = Spinner(self.executor)
@@ -45,7 +41,7 @@ class RigProbe:
         with self.lock:
             store.append((time.monotonic(), msg))
 
-    def command_field(self, field_t, frame_id='coils'):
+    def command_field(self, field_t, frame_id=contract.COILS_FRAME):
         """Publish one field command (T)."""
         msg = Vector3Stamped()
         msg.header.stamp = self.node.get_clock().now().to_msg()

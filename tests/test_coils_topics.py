@@ -14,6 +14,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 import pytest
 from rig_support import wait_for
+from tentacle_common import contract
 from tentacle_common.child_process import child_pids
 
 pytestmark = pytest.mark.ros
@@ -56,7 +57,11 @@ def test_field_command_reaches_each_supply_and_field_agrees(coil_rig, probe, dia
         assert wait_for(lambda: probe.latest(probe.fields, t_settled) is not None
                         and probe.latest(probe.currents, t_settled) is not None)
         msg = probe.latest(probe.fields, t_settled)
-        assert msg.header.frame_id == 'coils'
+        assert msg.header.frame_id == contract.COILS_FRAME
+        # Stamped with the reading's (wall-clock) time: in the past and recent. That it is the
+        # reading's, not the publication's, test_coil_bank checks against the emulator's log.
+        age_s = time.time() - (msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
+        assert 0.0 < age_s < 5.0, age_s
         measured = [msg.vector.x, msg.vector.y, msg.vector.z]
         # 0.01 A readback resolution (dxkdp) times at most 1.07 mT/A.
         assert close_to(measured, field, 2e-5), f'/coils/field {measured} vs {field}'

@@ -15,16 +15,16 @@ import sys
 import threading
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticStatus
 import pytest
 import rclpy  # tests/conftest.py claimed the private ROS domain before this
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rig_support import Spinner, wait_for
-from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
 from std_srvs.srv import Trigger
+from tentacle_common import contract
+from tentacle_common.driver_node import client, publisher, subscription
 from tentacle_sim.emulator_client import StageEmulatorProcess
 from tentacle_sim.sim_rig import NodeProcess
 from tentacle_sim.stage_emulator import GcodeStage
@@ -44,18 +44,15 @@ class AxisProbe:
         self.lock = threading.Lock()
         self.states = {axis: [] for axis in axes}
         self.diagnostics = []
-        self.target_pubs = {axis: self.node.create_publisher(Float64, f'/{axis}/target', 10)
+        self.target_pubs = {axis: publisher(self.node, contract.axis_target(axis))
                             for axis in axes}
-        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.estop_pub = self.node.create_publisher(Bool, '/estop', latched)
+        self.estop_pub = publisher(self.node, contract.ESTOP)
         for axis in axes:
-            self.node.create_subscription(JointState, f'/{axis}/state',
-                                          lambda msg, a=axis: self._keep(self.states[a], msg),
-                                          10)
-        self.node.create_subscription(DiagnosticArray, '/diagnostics',
-                                      lambda msg: self._keep(self.diagnostics, msg), 10)
-        self.clients = {(axis, name): self.node.create_client(Trigger, f'/{axis}/{name}')
+            subscription(self.node, contract.axis_state(axis),
+                         lambda msg, a=axis: self._keep(self.states[a], msg))
+        subscription(self.node, contract.DIAGNOSTICS,
+                     lambda msg: self._keep(self.diagnostics, msg))
+        self.clients = {(axis, name): client(self.node, contract.axis_service(axis, name))
                         for axis in axes for name in ('stop', 'home')}
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
@@ -102,6 +99,8 @@ def start_node(tmp_path, port, axis='inserter', **params):
     settings = {'port': port, 'axis': axis, 'max_length': 0.05, 'max_speed': SPEED,
                 'acceleration': ACCEL, 'reply_timeout_s': 0.2, **params}
     argv = [sys.executable, '-m', 'tentacle_inserter.inserter_node', '--ros-args']
+    if axis != 'inserter':
+        argv += ['-r', f'__node:={contract.axis_node_name(axis)}']
     for name, value in settings.items():
         argv += ['-p', f'{name}:={value}']
     return NodeProcess(argv, str(tmp_path / f'{axis}.log'))
@@ -345,6 +344,7 @@ def test_inserter_and_backbone_side_by_side_gcode_and_step1mm(tmp_path):
         assert probe.status(since, 'backbone')[2]['position'].startswith('estimated')
         commands = [e['command'] for e in emus.log('backbone')]
         assert commands == ['stop', 'extend', 'extend', 'extend']
+        assert {'inserter_node', 'backbone_node'} <= set(probe.node.get_node_names())
         assert probe.call('stop', 'backbone').success
         assert wait_for(lambda: [e['command'] for e in emus.log('backbone')][-1] == 'stop')
     finally:
@@ -354,12 +354,17 @@ def test_inserter_and_backbone_side_by_side_gcode_and_step1mm(tmp_path):
     assert codes == [0, 0], [node.output() for node in nodes]
 
 
-def test_an_axis_name_that_is_no_ros_name_is_refused_at_start(tmp_path):
-    node = start_node(tmp_path, str(tmp_path / 'absent'), axis='in-serter')
+@pytest.mark.parametrize('argv, message', [
+    (['-p', 'axis:=in-serter'], "axis: 'in-serter' is not a ROS name token"),
+    (['-p', 'axis:=backbone'], 'add -r __node:=backbone_node'),   # not a second inserter_node
+])
+def test_an_axis_that_cannot_run_is_refused_at_start(tmp_path, argv, message):
+    node = NodeProcess([sys.executable, '-m', 'tentacle_inserter.inserter_node', '--ros-args',
+                        '-p', f'port:={tmp_path / "absent"}', *argv], str(tmp_path / 'n.log'))
     try:
         code = node.popen.wait(30)
     finally:
         node.stop()
     assert code == 2, node.output()
-    assert "axis: 'in-serter' is not a ROS name token" in node.output()
+    assert message in node.output()
     assert 'Traceback' not in node.output()

@@ -59,3 +59,20 @@ def test_test_modules_have_unique_names():
     for path in sorted([*ROOT.glob('src/*/test/test_*.py'), *ROOT.glob('tests/**/test_*.py')]):
         seen.setdefault(path.name, []).append(str(path.relative_to(ROOT)))
     assert {name: paths for name, paths in seen.items() if len(paths) > 1} == {}
+
+
+def test_topic_names_are_written_once_in_the_contract():
+    # STYLE.md 12: a topic's name (/coils/field_cmd, say) is written once; the rest import it.
+    from tentacle_common import contract
+    names = {v.name for v in vars(contract).values()
+             if isinstance(v, (contract.Topic, contract.Service))}
+    names |= {f(axis).name for axis in contract.AXES
+              for f in (contract.axis_target, contract.axis_state)}
+    names |= {contract.axis_service(axis, verb).name for axis in contract.AXES
+              for verb in ('stop', 'home', 'enable')}
+    quoted = [(q + name + q) for name in names for q in '\'"']
+    found = [f'{path.relative_to(ROOT)}: {text}' for path in python_files()
+             if path.name != 'contract.py'
+             for text in quoted if text in path.read_text()]
+    assert not found, 'topic names written out instead of taken from contract:\n' + '\n'.join(
+        found)

@@ -11,21 +11,19 @@ import threading
 import time
 
 import cv2
-from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseStamped
-from nav_msgs.msg import Path
 import numpy as np
 import pytest
 import rclpy  # tests/conftest.py claimed the private ROS domain before this
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rig_support import Spinner, wait_for
-from sensor_msgs.msg import Image, JointState
+from sensor_msgs.msg import Image
+from tentacle_common import contract
+from tentacle_common.driver_node import publisher, subscription
 from tentacle_sim.sim_rig import NodeProcess
 from tentacle_vision import image_codec
 from tentacle_vision.pixels import ScaleMap
 from tentacle_vision.render import centreline_of, Renderer, to_bayer_rggb, to_bgr
-from tentacle_vision.tracker_node import image_qos
 
 pytestmark = pytest.mark.ros
 BASE_PX = (120.0, 1000.0)
@@ -42,13 +40,10 @@ class CameraProbe:
         self.node = rclpy.create_node('camera_probe', context=self.context)
         self.lock = threading.Lock()
         self.got = {'tip': [], 'shape': [], 'loop': [], 'diag': []}
-        self.image_pub = self.node.create_publisher(Image, '/camera/image_raw',
-                                                    image_qos('reliable'))
-        for topic, kind, key in (('/vision/tip', PoseStamped, 'tip'),
-                                 ('/vision/shape', Path, 'shape'),
-                                 ('/vision/loop', JointState, 'loop'),
-                                 ('/diagnostics', DiagnosticArray, 'diag')):
-            self.node.create_subscription(kind, topic, lambda m, k=key: self._keep(k, m), 10)
+        self.image_pub = publisher(self.node, contract.IMAGE)
+        for topic, key in ((contract.VISION_TIP, 'tip'), (contract.VISION_SHAPE, 'shape'),
+                           (contract.VISION_LOOP, 'loop'), (contract.DIAGNOSTICS, 'diag')):
+            subscription(self.node, topic, lambda m, k=key: self._keep(k, m))
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.spinner = Spinner(self.executor)
@@ -61,7 +56,7 @@ class CameraProbe:
         height, width, step, data = image_codec.to_message(image, encoding)
         msg = Image(height=height, width=width, encoding=encoding, step=step, data=data)
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 10 ** 9)
-        msg.header.frame_id = 'camera'
+        msg.header.frame_id = contract.CAMERA_FRAME
         self.image_pub.publish(msg)
 
     def stamped(self, key, stamp_ns):
@@ -118,7 +113,7 @@ def test_the_tip_and_shape_of_a_frame_carry_its_stamp_and_its_truth(tracker, enc
     frame = truth.image if encoding == 'mono8' else to_bayer_rggb(to_bgr(truth.image))
     tip = send_until_answered(probe, frame, encoding, 'tip', 1_000_000_123)
     assert tip is not None, node.output()
-    assert tip.header.frame_id == 'workspace'
+    assert tip.header.frame_id == contract.WORKSPACE_FRAME
     measured = np.array([tip.pose.position.x, tip.pose.position.y])
     assert np.hypot(*(measured - truth.tip_m)) <= 1.0 * MAP.s
     heading = 2 * np.arctan2(tip.pose.orientation.z, tip.pose.orientation.w)
@@ -178,7 +173,7 @@ def test_camera_node_replays_a_recorded_run_into_the_tracker(tmp_path):
     camera = None
     try:
         # The probe must hear the tracker before the run starts: tips are not kept for it.
-        assert wait_for(lambda: probe.node.count_publishers('/vision/tip') > 0, 20.0)
+        assert wait_for(lambda: probe.node.count_publishers(contract.VISION_TIP.name) > 0, 20.0)
         time.sleep(0.5)
         camera = NodeProcess([sys.executable, '-m', 'tentacle_vision.camera_node', '--ros-args',
                               '-p', f'source:={tmp_path}', '-p', 'rate:=5.0',

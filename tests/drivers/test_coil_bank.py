@@ -242,3 +242,22 @@ def test_a_supply_found_holding_current_is_ramped_down_not_jumped(emulate, wait_
         assert off and off[0] > times[-1]  # zero first, then off
     finally:
         bank.shutdown(timeout_s=1.0)
+
+
+def test_measurement_time_is_when_the_oldest_reading_was_asked(rig, wait_for):
+    # /coils/field is stamped with this (the closed loop needs the field's age). Check it
+    # against when each emulated supply took the read request off its line.
+    bank, emus = rig(readback_period_s=0.05)
+    bank.command([1.0, -1.0, 0.5])
+    assert wait_for(lambda: np.allclose(bank.measured_currents(), [1.0, -1.0, 0.5], atol=0.02))
+    wall_minus_monotonic = time.time() - time.monotonic()
+    asked = [ch.measured_at_s - wall_minus_monotonic for ch in bank.channels]
+    for emu, at in zip(emus, asked):
+        reads = [e['t'] for e in emu.log if e.get('command') == 'READ_OUTPUT']
+        # The reading asked at `at` is the first read request to arrive after it (the request
+        # crosses the modelled 115200-baud line in well under 10 ms).
+        first = min(t for t in reads if t >= at - 1e-4)
+        assert first - at < 0.01, (first, at)
+    assert time.time() - bank.measured_at() < 1.0
+    bank.shutdown(timeout_s=1.0)  # no more readings: the channels' times stand still
+    assert bank.measured_at() == min(ch.measured_at_s for ch in bank.channels)

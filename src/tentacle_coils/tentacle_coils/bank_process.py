@@ -60,6 +60,7 @@ class _ServedBank:
         return {'status': [level, message], 'enabled': bank.enabled,
                 'estopped': bank.estopped, 'fault': bank.fault, 'connected': bank.connected(),
                 'measured_a': bank.measured_currents().tolist(),
+                'measured_at_s': bank.measured_at(),
                 'setpoints_a': bank.setpoints().tolist(), 'channels': bank.snapshots()}
 
     def shutdown(self, reason):
@@ -89,6 +90,7 @@ class BankClient(ChildClient):
     GONE = CommandRejected
     STARTING = {'status': ['error', 'starting'], 'enabled': False, 'estopped': False,
                 'fault': '', 'connected': False, 'measured_a': [math.nan] * 3,
+                'measured_at_s': math.nan,
                 'setpoints_a': [0.0] * 3, 'channels': []}
 
     def __init__(self, on_rejected=None, **bank_kwargs):
@@ -145,6 +147,10 @@ class BankClient(ChildClient):
     def measured_currents(self):
         """Return the measured currents, x, y, z (A); NaN where unknown."""
         return list(self.state['measured_a'])
+
+    def measured_at(self):
+        """Return when the oldest of the measured currents was read (s, time.time()); NaN."""
+        return self.state['measured_at_s']
 
     def setpoints(self):
         """Return the setpoints the supplies hold, x, y, z (A)."""

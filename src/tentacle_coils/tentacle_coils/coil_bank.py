@@ -74,6 +74,7 @@ class Channel:
         self.confirmed = False  # a read-back since the last set agreed with sent_a, output_on
         self.held = None  # (setpoint A, output on) as last read back from the device
         self.measured_a = math.nan
+        self.measured_at_s = math.nan  # wall clock (time.time()) the reading was asked at
         self.connected = False
         self.last_error = ''
         self.updates = 0
@@ -283,9 +284,12 @@ class Channel:
                 self.supply.verify_period_s is not None and now >= self._next_verify)
         if now >= self._next_readback + (READBACK_MAX_DEFER_S if busy else 0.0):
             self._next_readback = now + self.readback_period_s
+            # Stamped when asked: the device measured after this, so an age taken from it
+            # is never less than the reading's true age.
+            asked_at = time.time()
             measured = self.supply.read_current()
             with self._cond:
-                self.measured_a = measured
+                self.measured_a, self.measured_at_s = measured, asked_at
         if verify:
             self._verify()
 
@@ -413,6 +417,11 @@ class CoilBank:
     def measured_currents(self):
         """Return the measured currents (3,) in A; NaN where unknown."""
         return np.array([ch.measured_a for ch in self.channels])
+
+    def measured_at(self):
+        """Return the wall-clock time (s, time.time()) of the oldest reading; NaN if unknown."""
+        times = [ch.measured_at_s for ch in self.channels]
+        return math.nan if any(math.isnan(t) for t in times) else min(times)
 
     def setpoints(self):
         """Return the setpoints the supplies hold (3,) in A."""

@@ -15,18 +15,17 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Vector3Stamped
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from std_msgs.msg import Bool
-from std_srvs.srv import SetBool
+from rclpy.time import Time
 
 from tentacle_coils.bank_process import BankClient
 from tentacle_coils.errors import CommandRejected
 from tentacle_coils.field_map import ActuationMap, Limits, plan_currents
 from tentacle_coils.params import COILS_PARAMS, NODE_NAME
-from tentacle_common.driver_node import (declare_parameters, diagnostic_status,
-                                         RosLogHandler, run_node)
+from tentacle_common import contract
+from tentacle_common.driver_node import (declare_parameters, diagnostic_status, publisher,
+                                         RosLogHandler, run_node, service, subscription)
 
-FRAME_ID = 'coils'
+FRAME_ID = contract.COILS_FRAME
 
 
 class CoilsNode(Node):
@@ -57,14 +56,12 @@ class CoilsNode(Node):
             reply_timeout_s=p['reply_timeout_s'], max_turnaround_s=p['max_turnaround_s'],
             voltage_limit_v=p['voltage_limit'])
 
-        self.currents_pub = self.create_publisher(Vector3Stamped, '/coils/currents', 10)
-        self.field_pub = self.create_publisher(Vector3Stamped, '/coils/field', 10)
-        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.create_subscription(Vector3Stamped, '/coils/field_cmd', self.on_field_cmd, 10)
-        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.create_subscription(Bool, '/estop', self.on_estop, latched)
-        self.create_service(SetBool, '/coils/enable', self.on_enable)
+        self.currents_pub = publisher(self, contract.CURRENTS)
+        self.field_pub = publisher(self, contract.FIELD)
+        self.diag_pub = publisher(self, contract.DIAGNOSTICS)
+        subscription(self, contract.FIELD_CMD, self.on_field_cmd)
+        subscription(self, contract.ESTOP, self.on_estop)
+        service(self, contract.COILS_ENABLE, self.on_enable)
         self.create_timer(1.0 / p['publish_rate'], self.publish_state)
         self.create_timer(1.0, self.publish_diagnostics)
         if self.auto_enable:
@@ -129,20 +126,26 @@ class CoilsNode(Node):
             self._auto_enable_timer.cancel()  # the operator decides from now on
         return response
 
-    def _stamped(self, vector):
+    @staticmethod
+    def _stamped(vector, stamp_s):
         msg = Vector3Stamped()
-        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.stamp = Time(nanoseconds=round(stamp_s * 1e9)).to_msg()
         msg.header.frame_id = FRAME_ID
         msg.vector.x, msg.vector.y, msg.vector.z = (float(v) for v in vector)
         return msg
 
     def publish_state(self):
-        """Publish measured currents and the field they make (nothing while any is unknown)."""
-        measured = self.bank.measured_currents()
-        if not all(math.isfinite(v) for v in measured):
+        """
+        Publish measured currents and the field they make (nothing while any is unknown).
+
+        Stamped with the time the oldest of the three readings was asked for (wall clock, as
+        ROS time), not the time of publishing: a subscriber knows how old the field is.
+        """
+        measured, at_s = self.bank.measured_currents(), self.bank.measured_at()
+        if not all(math.isfinite(v) for v in [*measured, at_s]):
             return
-        self.currents_pub.publish(self._stamped(measured))
-        self.field_pub.publish(self._stamped(self.actuation.field(measured)))
+        self.currents_pub.publish(self._stamped(measured, at_s))
+        self.field_pub.publish(self._stamped(self.actuation.field(measured), at_s))
 
     def publish_diagnostics(self):
         """Publish one status per supply and one for the bank."""

@@ -1,7 +1,9 @@
 """
-ROS glue every driver node shares: parameters, log forwarding, diagnostics, start and spin.
+ROS glue every node shares: the contract's topics, parameters, logging, diagnostics, spin.
 
-The only module of tentacle_common that imports rclpy. A driver node declares its table
+The only module of tentacle_common that imports rclpy. ``publisher``, ``subscription``,
+``service`` and ``client`` make the endpoints of tentacle_common.contract's rows, with their
+types and QoS (nodes, tests, benches and scripts alike). A driver node declares its table
 with ``declare_parameters``, forwards its pure code's logging with ``RosLogHandler``, builds
 one DiagnosticStatus per device with ``diagnostic_status``, starts rclpy with
 ``init_checked`` (its parameters checked against the table first) and spins with
@@ -10,6 +12,7 @@ one DiagnosticStatus per device with ``diagnostic_status``, starts rclpy with
 """
 
 import faulthandler
+import importlib
 import logging
 import os
 import signal
@@ -23,10 +26,50 @@ from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescr
 import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from tentacle_common.errors import ConfigError, DriverError
 from tentacle_common.params import check_ros_args, describe, out_of_range
 import yaml
+
+
+def interface(type_name):
+    """Return the message or service class of 'pkg/msg/Name' or 'pkg/srv/Name'."""
+    package, kind, name = type_name.split('/')
+    return getattr(importlib.import_module(f'{package}.{kind}'), name)
+
+
+def qos_profile(qos):
+    """Return the rclpy QoSProfile of a contract.Qos row."""
+    return QoSProfile(
+        depth=qos.depth, history=HistoryPolicy.KEEP_LAST,
+        reliability=ReliabilityPolicy.RELIABLE if qos.reliable
+        else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if qos.latched
+        else DurabilityPolicy.VOLATILE)
+
+
+def publisher(node, topic, qos=None):
+    """Create a publisher for a contract.Topic (its own QoS unless qos, a Qos row, is given)."""
+    return node.create_publisher(interface(topic.msg_type), topic.name,
+                                 qos_profile(qos or topic.qos))
+
+
+def subscription(node, topic, callback, qos=None):
+    """Create a subscription to a contract.Topic (its own QoS unless qos is given)."""
+    return node.create_subscription(interface(topic.msg_type), topic.name, callback,
+                                    qos_profile(qos or topic.qos))
+
+
+def service(node, srv, callback):
+    """Create the server of a contract.Service."""
+    return node.create_service(interface(srv.srv_type), srv.name, callback)
+
+
+def client(node, srv):
+    """Create a client of a contract.Service."""
+    return node.create_client(interface(srv.srv_type), srv.name)
+
 
 LEVELS = {'ok': DiagnosticStatus.OK, 'warn': DiagnosticStatus.WARN,
           'error': DiagnosticStatus.ERROR}
@@ -105,6 +148,26 @@ def wants_help(argv):
     """Return True when --help comes before any --ros-args."""
     head = argv[:argv.index('--ros-args')] if '--ros-args' in argv else argv
     return '--help' in head
+
+
+def node_name_of(argv, default):
+    """
+    Return the node's name as rcl will give it: ``-r __node:=NAME`` in --ros-args, or default.
+
+    Its params-file section and its log lines use that name: two instances of one
+    executable (the inserter and the backbone axis) run under two names.
+    """
+    name, in_ros_args = default, False
+    for i, arg in enumerate(argv):
+        if arg == '--ros-args':
+            in_ros_args = True
+        elif arg == '--':
+            in_ros_args = False
+        elif in_ros_args and arg in ('-r', '--remap') and i + 1 < len(argv):
+            target, sep, value = argv[i + 1].partition(':=')
+            if sep and target in ('__node', '__name', f'{default}:__node', f'{default}:__name'):
+                name = value
+    return name
 
 
 def init_checked(argv, node_name, table):
@@ -207,9 +270,10 @@ def run_node(argv, node_name, table, doc, make_node, stop_safely):
         actuators were brought to their safe state, read back
     """
     if wants_help(argv):
-        print(f'usage: {node_name} [--ros-args --params-file FILE | -p NAME:=VALUE ...]\n\n'
-              + doc + '\nparameters:\n' + describe(table))
+        print(f'usage: {node_name} [--ros-args --params-file FILE | -p NAME:=VALUE ...'
+              ' | -r __node:=NAME]\n\n' + doc + '\nparameters:\n' + describe(table))
         return
+    node_name = node_name_of(argv, node_name)
     try:
         warnings = init_checked(argv, node_name, table)
     except ConfigError as exc:

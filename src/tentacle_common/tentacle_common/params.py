@@ -228,18 +228,21 @@ def resolve(table, node_name, params_file=None, overrides=None):
     Defaults, then this node's section of a params file, then ``overrides``; each value is
     checked against its row's type and range (each element of a list).
 
-    :raises ConfigError: a bad file, an unknown name in this node's section or in the
-        overrides (the nearest known name suggested), or a value of the wrong type or out of
-        range, named
+    :raises ConfigError: a bad file or one with no section for this node, an unknown name in
+        this node's section or in the overrides (the nearest known name suggested), or a
+        value of the wrong type or out of range, named
     """
     by_name = {p.name: p for p in table}
     values = {p.name: p.default for p in table}
     if params_file is not None:
         document, _, _ = check_params_file(params_file, node_name, table, unknown='refuse')
-        for section, body in document.items():
-            if _own_section(section, node_name):
-                values.update({k: v for k, v in body['ros__parameters'].items()
-                               if k in by_name})
+        own = [section for section in document if _own_section(section, node_name)]
+        if not own:  # the defaults would stand in silently for what the file meant to say
+            raise ConfigError(f'params file {params_file}: no {node_name} section (it has: '
+                              f'{", ".join(map(str, document)) or "none"})')
+        for section in own:
+            values.update({k: v for k, v in document[section]['ros__parameters'].items()
+                           if k in by_name})
     for name, value in (overrides or {}).items():
         if name not in by_name:
             raise ConfigError(f'{name}: not a {node_name} parameter{_suggestion(name, table)}')

@@ -105,3 +105,12 @@ def test_devices_fifos_and_large_files_are_refused_naming_the_file(tmp_path):
     big.write_text(f'{NODE}:\n  ros__parameters:\n' + '#' * (2 << 20) + '\n')
     with pytest.raises(ConfigError, match=f'params file {big}: larger than'):
         check_params_file(str(big), NODE, TABLE)
+
+
+def test_resolve_refuses_a_params_file_without_this_nodes_section(tmp_path):
+    # A tool reading the backbone's file as the inserter's would run on the defaults.
+    path = tmp_path / 'backbone.yaml'
+    path.write_text('backbone_node:\n  ros__parameters:\n    speed_m_per_s: 0.05\n')
+    with pytest.raises(ConfigError, match=f'no {NODE} section \\(it has: backbone_node\\)'):
+        resolve(TABLE, NODE, str(path))
+    assert resolve(TABLE, 'backbone_node', str(path))['speed_m_per_s'] == 0.05

@@ -10,7 +10,10 @@ outside [0, max_length] is refused with a logged reason and never reaches the wi
 axis moves to the latest target only, a move that does not end in its expected time stops
 the axis, and after a stop or a lost line it must be homed again (home: "zero is here"); a
 target that arrives while the line is down is refused, never kept for the reconnect. An
-``axis`` that is not one ROS name token is refused at start (exit 2).
+``axis`` that is not one ROS name token is refused at start (exit 2), and so is an axis other
+than ``inserter`` under the default node name: the backbone runs as
+``-r __node:=backbone_node`` (its params file section named so), so two axes never share a
+node name.
 A step1mm axis reports a counted position: /diagnostics says it is estimated. The axis logic
 is tentacle_inserter.axis_worker and stage (no rclpy), run in a process of its own
 (axis_process) so that the axis stops however this node dies; this module is the ROS glue.
@@ -21,12 +24,11 @@ import sys
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Bool, Float64
-from std_srvs.srv import SetBool, Trigger
-from tentacle_common.driver_node import (declare_parameters, diagnostic_status,
-                                         RosLogHandler, run_node)
+from tentacle_common import contract
+from tentacle_common.driver_node import (declare_parameters, diagnostic_status, publisher,
+                                         RosLogHandler, run_node, service, subscription)
+from tentacle_common.errors import ConfigError
 from tentacle_inserter.axis_process import AxisClient, LOGGER
 from tentacle_inserter.params import check_axis, INSERTER_PARAMS, NODE_NAME
 from tentacle_inserter.stage import TargetRefused
@@ -40,6 +42,11 @@ class InserterNode(Node):
         super().__init__(NODE_NAME)
         p = declare_parameters(self, INSERTER_PARAMS)
         self.axis = check_axis(p['axis'])  # before the axis process: nothing is started
+        if self.axis != 'inserter' and self.get_name() == NODE_NAME:
+            # Two axes under one node name would share its parameters and its log.
+            raise ConfigError(f'axis {self.axis} runs under its own node name, not {NODE_NAME}:'
+                              f' add -r __node:={contract.axis_node_name(self.axis)} after '
+                              '--ros-args (its params file section takes that name too)')
         logger = logging.getLogger(LOGGER)
         logger.addHandler(RosLogHandler(self.get_logger()))
         logger.setLevel(logging.INFO)
@@ -47,16 +54,13 @@ class InserterNode(Node):
         # process dies, however it dies.
         self.client = AxisClient({**p, 'axis': self.axis}, on_refused=self._refused)
         self.port, self.dialect = p['port'], p['dialect']
-        ns = f'/{self.axis}'
-        self.state_pub = self.create_publisher(JointState, f'{ns}/state', 10)
-        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.create_subscription(Float64, f'{ns}/target', self.on_target, 10)
-        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.create_subscription(Bool, '/estop', self.on_estop, latched)
-        self.create_service(Trigger, f'{ns}/stop', self.on_stop)
-        self.create_service(Trigger, f'{ns}/home', self.on_home)
-        self.create_service(SetBool, f'{ns}/enable', self.on_enable)
+        self.state_pub = publisher(self, contract.axis_state(self.axis))
+        self.diag_pub = publisher(self, contract.DIAGNOSTICS)
+        subscription(self, contract.axis_target(self.axis), self.on_target)
+        subscription(self, contract.ESTOP, self.on_estop)
+        service(self, contract.axis_service(self.axis, 'stop'), self.on_stop)
+        service(self, contract.axis_service(self.axis, 'home'), self.on_home)
+        service(self, contract.axis_service(self.axis, 'enable'), self.on_enable)
         self.create_timer(1.0 / p['state_rate'], self.publish_state)
         self.create_timer(1.0, self.publish_diagnostics)
 

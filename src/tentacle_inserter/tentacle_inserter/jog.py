@@ -188,7 +188,10 @@ def build_parser():
     parser = argparse.ArgumentParser(prog='jog', description=__doc__.strip().split('\n')[0],
                                      epilog=HELP)
     parser.add_argument('actions', nargs='*', help='carried out in turn (none: interactive)')
-    parser.add_argument('--params', help='a ROS params file (its inserter_node section)')
+    parser.add_argument('--params', help='a ROS params file (its --node section)')
+    parser.add_argument('--node', default=NODE_NAME,
+                        help='the section of --params to read: inserter_node (default) or '
+                             'the node name another axis runs under, e.g. backbone_node')
     for p in INSERTER_PARAMS:
         if p.name not in ('axis', 'state_rate'):
             parser.add_argument('--' + p.name.replace('_', '-'), dest=p.name,
@@ -225,7 +228,7 @@ def main(args=None):
     overrides = {p.name: getattr(opts, p.name) for p in INSERTER_PARAMS
                  if getattr(opts, p.name, None) is not None}
     try:
-        params = resolve(INSERTER_PARAMS, NODE_NAME, opts.params, overrides)
+        params = resolve(INSERTER_PARAMS, opts.node, opts.params, overrides)
         stage = make_stage(params)
         planned = plan(opts.actions, stage)
     except (ConfigError, ActionsRefused) as exc:

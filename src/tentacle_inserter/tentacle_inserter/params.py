@@ -6,13 +6,11 @@ descriptor, ``inserter_node --help`` prints the table, and what a lab writes is 
 against it before rcl reads it. Names are those of DESIGN.md; units are in the descriptions.
 """
 
-import re
-
+from tentacle_common.contract import is_name_token
 from tentacle_common.errors import ConfigError
 from tentacle_common.params import Param
 
 NODE_NAME = 'inserter_node'
-_NAME_TOKEN = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')  # a ROS name token (rcl's rule)
 
 INSERTER_PARAMS = (
     Param('port', '/dev/ttyACM0', 'serial device path of the stage'),
@@ -48,7 +46,7 @@ def check_axis(axis):
     :raises ConfigError: anything else (it becomes /<axis>/target, /<axis>/state, ...)
     """
     name = str(axis).strip('/')
-    if not _NAME_TOKEN.fullmatch(name):
+    if not is_name_token(name):
         raise ConfigError(f'axis: {axis!r} is not a ROS name token (letters, digits and _, '
                           f'not starting with a digit), as its topics /<axis>/target, '
                           '/<axis>/state, ... need: e.g. inserter or backbone')

@@ -17,12 +17,13 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
-from tentacle_common.driver_node import declare_parameters, diagnostic_status, run_node
+from tentacle_common import contract
+from tentacle_common.driver_node import (declare_parameters, diagnostic_status, publisher,
+                                         run_node)
 from tentacle_common.errors import ConfigError
 from tentacle_vision import image_codec
 from tentacle_vision.params import CAMERA_NODE, CAMERA_PARAMS
 from tentacle_vision.sources import as_encoding, ENCODINGS, FOLDER_RATE_HZ, open_source
-from tentacle_vision.tracker_node import image_qos
 
 
 class CameraNode(Node):
@@ -41,9 +42,9 @@ class CameraNode(Node):
         self.encoding, self.frame_id, self.spec = p['encoding'], p['frame_id'], p['source']
         self.rate_hz = p['rate'] or self.source.rate_hz or FOLDER_RATE_HZ
         self.wait_for_subscriber = p['wait_for_subscriber']
-        self.image_pub = self.create_publisher(Image, '/camera/image_raw', image_qos('reliable'))
-        self.info_pub = self.create_publisher(CameraInfo, '/camera/camera_info', 10)
-        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.image_pub = publisher(self, contract.IMAGE)
+        self.info_pub = publisher(self, contract.CAMERA_INFO)
+        self.diag_pub = publisher(self, contract.DIAGNOSTICS)
         self.create_timer(1.0, self.publish_diagnostics)
         self.frames, self.ended, self.problem = 0, False, ''
         self._stop = threading.Event()

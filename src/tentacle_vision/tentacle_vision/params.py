@@ -6,6 +6,7 @@ descriptor, ``--help`` prints the table, and what a lab writes is checked agains
 of DESIGN.md (``base_px``, ``metres_per_px``, ``homography``) come first.
 """
 
+from tentacle_common import contract
 from tentacle_common.params import Param
 
 TRACKER_NODE = 'tracker_node'
@@ -17,7 +18,7 @@ TRACKER_PARAMS = (
           1e-7, 1.0),
     Param('homography', [0.0] * 9, 'pixels to workspace metres, 3 x 3 row-major (all zero: '
           'use metres_per_px with the origin at base_px); scripts/calibrate_camera fits it'),
-    Param('image_topic', '/camera/image_raw', 'frames: mono8, bgr8, rgb8 or bayer_rggb8'),
+    Param('image_topic', contract.IMAGE.name, 'frames: mono8, bgr8, rgb8 or bayer_rggb8'),
     Param('image_reliability', 'reliable', 'QoS of the frames: reliable or best_effort (to '
           'match a best-effort camera driver)'),
     Param('segmentation', 'otsu', 'otsu (of the contrast to the local background), adaptive, '
@@ -49,7 +50,7 @@ CAMERA_PARAMS = (
     Param('rate', 0.0, "frames per second (0: the source's own: a video's, a device's, "
           '30 for a folder)', 0.0, 1000.0),
     Param('encoding', 'bgr8', 'published encoding: bgr8 or mono8', ),
-    Param('frame_id', 'camera', 'header frame of the frames and the camera info'),
+    Param('frame_id', contract.CAMERA_FRAME, 'header frame of the frames and the camera info'),
     Param('loop', False, 'replay a video or folder from the start when it ends'),
     Param('wait_for_subscriber', False, 'start when /camera/image_raw has a subscriber (a '
           'replay then loses no frame to discovery)'),

@@ -19,6 +19,7 @@ never a stale or made-up tip. The pipeline is tentacle_vision.tracker (no rclpy)
 """
 
 import collections
+from dataclasses import replace
 import math
 import sys
 import time
@@ -27,9 +28,10 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Path
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image, JointState
-from tentacle_common.driver_node import declare_parameters, diagnostic_status, run_node
+from tentacle_common import contract
+from tentacle_common.driver_node import (declare_parameters, diagnostic_status, publisher,
+                                         run_node, subscription)
 from tentacle_common.errors import ConfigError
 from tentacle_vision import image_codec
 from tentacle_vision.annotate import annotate
@@ -39,20 +41,18 @@ from tentacle_vision.pixels import pixel_map
 from tentacle_vision.segmentation import METHODS
 from tentacle_vision.tracker import Settings, status_of, Tracker
 
-FRAME_ID = 'workspace'
+FRAME_ID = contract.WORKSPACE_FRAME
 TIMES_KEPT = 200  # processing times behind the diagnostics' median and p95
 
 
 def image_qos(reliability):
     """
-    Return the frames' QoS: the latest two, reliable (default) or best effort.
+    Return the frames' QoS row: the contract's (the latest two, reliable) or best effort.
 
-    Reliable, because a best-effort 3 MB frame is lost more often than not between two
-    processes (../shared/NOTES.md, images); a best-effort camera driver needs best_effort.
+    Reliable by default, because a best-effort 3 MB frame is lost more often than not between
+    two processes (../shared/NOTES.md, images); a best-effort camera driver needs best_effort.
     """
-    return QoSProfile(depth=2, history=HistoryPolicy.KEEP_LAST,
-                      reliability=ReliabilityPolicy.BEST_EFFORT if reliability == 'best_effort'
-                      else ReliabilityPolicy.RELIABLE)
+    return replace(contract.FRAMES, reliable=reliability != 'best_effort')
 
 
 def pose(point_m, heading_rad, header):
@@ -88,13 +88,13 @@ class TrackerNode(Node):
         warm_up()  # the first frame must not wait for the compiled pass to load
         self.debug_period_s = 1.0 / p['debug_rate'] if p['debug_rate'] > 0 else math.inf
         self.debug_scale = p['debug_scale']
-        self.tip_pub = self.create_publisher(PoseStamped, '/vision/tip', 10)
-        self.shape_pub = self.create_publisher(Path, '/vision/shape', 10)
-        self.loop_pub = self.create_publisher(JointState, '/vision/loop', 10)
-        self.debug_pub = self.create_publisher(Image, '/vision/debug_image', 1)
-        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.create_subscription(Image, p['image_topic'], self.on_image,
-                                 image_qos(p['image_reliability']))
+        self.tip_pub = publisher(self, contract.VISION_TIP)
+        self.shape_pub = publisher(self, contract.VISION_SHAPE)
+        self.loop_pub = publisher(self, contract.VISION_LOOP)
+        self.debug_pub = publisher(self, contract.VISION_DEBUG)
+        self.diag_pub = publisher(self, contract.DIAGNOSTICS)
+        subscription(self, replace(contract.IMAGE, name=p['image_topic']), self.on_image,
+                     image_qos(p['image_reliability']))
         self.create_timer(1.0, self.publish_diagnostics)
         self.image_topic = p['image_topic']
         self.times = collections.deque(maxlen=TIMES_KEPT)

@@ -2,15 +2,18 @@
 A tentacle in a scene, built once, for repeated solves: the planner's and simulator's model.
 
 ``TentacleModel`` holds what does not change between solves (the tentacle, the joint model,
-sub-links, gravity, magnet-to-magnet interaction, the solver's budgets) and caches a chain
-per inserted length. It has one state representation whatever the joint model: joint angles
+sub-links, gravity, magnet-to-magnet interaction, the solver's budgets) and caches the
+CHAIN_CACHE_SIZE chains last used, by inserted length (a simulator fed continuous stage
+positions asks for a new length every frame: the cache stays bounded). It has one state representation whatever the joint model: joint angles
 (n, 3), rad, per joint bend_1 (in the base plane), bend_2 and twist (spatial.py); a planar
 model's state has only bend_1, and ``link_angles`` is its absolute-angle view. A state is
 carried from one inserted length to the next (``carry``): the chain grows at the base as the
 body goes in, so joints are matched by material coordinate.
 
 Solves are deterministic: the iteration budget decides the result, and the wall-clock limit
-only guards against a hang, so the same inputs give the same state on any machine.
+only guards against a hang, so the same inputs give the same state on any machine. A caller
+with a deadline of its own (a simulator at camera rate) gives a solve ``time_limit_s``: the
+result then may be unconverged, and says so; solving on from its state continues the descent.
 
 ``field_sensitivity`` differentiates the equilibrium implicitly: the gradient g(q*, B) = 0
 at every equilibrium, so H dq = -(dg/dB) dB with H the Hessian at q*, and
@@ -19,6 +22,7 @@ torque_balance.py, whose closed forms this shares). ``moment_sensitivity`` does 
 the links' magnetic moments (link frame), the planner's magnetisation unknowns.
 """
 
+from collections import OrderedDict
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -27,6 +31,7 @@ from tentacle_model.chain import Chain, discretise
 
 DEFAULT_ITERATIONS = 200
 HANG_GUARD_S = 60.0  # wall-clock limit: a guard only, never what decides a result
+CHAIN_CACHE_SIZE = 64  # chains kept: a plan's key and playback steps, a simulator's recent
 
 
 @dataclass(frozen=True)
@@ -77,7 +82,7 @@ class TentacleModel:
         self.gravity_m_s2 = np.asarray(gravity_m_s2, dtype=float)
         self.dipoles, self.backbone_m = dipoles, backbone_m
         self.tol, self.max_iterations = tol, max_iterations
-        self._chains = {}
+        self._chains = OrderedDict()  # least recently used first
         self._last_evaluation = None  # (solution, field, _evaluate's result)
         self.chain(spec.length_m)  # a bad knob is refused now, not at the first solve
 
@@ -90,15 +95,21 @@ class TentacleModel:
         """
         backbone = self.backbone_m if backbone_m is None else float(backbone_m)
         key = (round(float(inserted_m), 12), round(backbone, 12))
-        if key not in self._chains:
-            self._chains[key] = discretise(self.spec, key[0], self.sublinks, key[1])
-        return self._chains[key]
+        chain = self._chains.get(key)
+        if chain is None:
+            chain = self._chains[key] = discretise(self.spec, key[0], self.sublinks, key[1])
+            if len(self._chains) > CHAIN_CACHE_SIZE:
+                self._chains.popitem(last=False)
+        else:
+            self._chains.move_to_end(key)
+        return chain
 
     def straight(self, inserted_m):
         """Return the straight state (n, 3) at an inserted length."""
         return np.zeros((self.chain(inserted_m).size, 3))
 
-    def solve(self, inserted_m, field_t, state=None, moments_a_m2=None, backbone_m=None):
+    def solve(self, inserted_m, field_t, state=None, moments_a_m2=None, backbone_m=None,
+              time_limit_s=HANG_GUARD_S):
         """
         Return the Solution at an inserted length in a field, from a state (default straight).
 
@@ -108,7 +119,10 @@ class TentacleModel:
         :param moments_a_m2: (n, 3) link moments (link frame) in place of the tentacle's own:
             the planner's magnetisation
         :param backbone_m: the backbone's reach past the base, m (default the model's)
-        :raises ValueError: a state or moments of another shape, a non-finite field
+        :param time_limit_s: this solve's wall-clock budget, s: past it the Solution is the
+            descent so far, its equilibrium ``converged`` False and its reason saying so
+        :raises ValueError: a state or moments of another shape, a non-finite field, a
+            negative or non-finite time limit
         """
         chain = self.chain(inserted_m, backbone_m)
         if moments_a_m2 is not None:
@@ -120,10 +134,12 @@ class TentacleModel:
         if start.shape != (chain.size, 3):
             raise ValueError(f'state of shape {start.shape} for {chain.size} links at '
                              f'{inserted_m:g} m inserted: carry() it there first')
+        if not (np.isfinite(time_limit_s) and time_limit_s >= 0):
+            raise ValueError(f'time limit {time_limit_s!r} s must be finite and >= 0')
         initial = np.cumsum(start[:, 0]) if self.dof == 1 else start
         eq = statics.solve(chain, field_t, self.gravity_m_s2, dof=self.dof, initial=initial,
                            tol=self.tol, max_iterations=self.max_iterations,
-                           time_limit_s=HANG_GUARD_S, dipoles=self.dipoles)
+                           time_limit_s=time_limit_s, dipoles=self.dipoles)
         return Solution(float(inserted_m), self.state_of(eq), eq, chain)
 
     def state_of(self, eq):

@@ -129,3 +129,38 @@ def test_a_planar_equilibrium_unstable_out_of_its_plane_is_seen():
     assert planar.stability(solution, [-field, 0, 0]) == pytest.approx(
         min(k_out - moment * field, k_twist), rel=1e-6)
     assert planar.stability(solution, [-field, 0, 0]) < 0 < solution.equilibrium.stability
+
+
+def test_the_chain_cache_stays_bounded_under_continuous_insertion(braided):
+    # A simulator asks for a new inserted length every frame (a stage moving at 1 mm/s seen
+    # at 30 Hz): the cache keeps the most recent chains only, and answers do not change.
+    from tentacle_model.model import CHAIN_CACHE_SIZE
+    model = TentacleModel(braided, dof=1, sublinks=2)
+    lengths = np.linspace(0.001, braided.length_m, 10 * CHAIN_CACHE_SIZE)
+    state, previous = None, None
+    for inserted in lengths:
+        if state is not None:
+            state = model.carry(state, previous, inserted)
+        state, previous = model.solve(inserted, IN_PLANE, state).state, inserted
+        assert len(model._chains) <= CHAIN_CACHE_SIZE
+    fresh = TentacleModel(braided, dof=1, sublinks=2).solve(lengths[0], IN_PLANE)
+    again = model.solve(lengths[0], IN_PLANE)   # its chain was evicted long ago: rebuilt
+    assert np.array_equal(again.points_m, fresh.points_m)
+    recent = model.chain(lengths[-1])
+    assert model.chain(lengths[-1]) is recent   # the one in use is kept
+
+
+def test_a_solve_within_its_own_time_budget(braided):
+    model = TentacleModel(braided, dof=3, sublinks=2)
+    full = model.solve(braided.length_m, BRAIDED_FIELD)
+    assert full.equilibrium.converged
+    cut = model.solve(braided.length_m, BRAIDED_FIELD, time_limit_s=0.0)
+    assert not cut.equilibrium.converged
+    assert cut.equilibrium.reason == 'no convergence within the 0 s limit'
+    assert cut.equilibrium.iterations == 0 and np.all(cut.state == 0.0)  # the start, as given
+    # Solving on from where a cut solve stopped reaches the same equilibrium.
+    assert model.solve(braided.length_m, BRAIDED_FIELD, cut.state).points_m == pytest.approx(
+        full.points_m, abs=1e-9)
+    for bad in (-1.0, np.nan, np.inf):
+        with pytest.raises(ValueError, match='time limit'):
+            model.solve(braided.length_m, BRAIDED_FIELD, time_limit_s=bad)

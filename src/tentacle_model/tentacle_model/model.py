@@ -4,9 +4,10 @@ A tentacle in a scene, built once, for repeated solves: the planner's and simula
 ``TentacleModel`` holds what does not change between solves (the tentacle, the joint model,
 sub-links, gravity, magnet-to-magnet interaction, the solver's budgets) and caches the
 CHAIN_CACHE_SIZE chains last used, by inserted length (a simulator fed continuous stage
-positions asks for a new length every frame: the cache stays bounded). It has one state representation whatever the joint model: joint angles
-(n, 3), rad, per joint bend_1 (in the base plane), bend_2 and twist (spatial.py); a planar
-model's state has only bend_1, and ``link_angles`` is its absolute-angle view. A state is
+positions asks for a new length every frame: the cache stays bounded). It has one state
+representation whatever the joint model: joint angles (n, 3), rad, per joint bend_1 (in
+the base plane), bend_2 and twist (spatial.py); a planar model's state has only bend_1,
+and ``link_angles`` is its absolute-angle view. A state is
 carried from one inserted length to the next (``carry``): the chain grows at the base as the
 body goes in, so joints are matched by material coordinate.
 

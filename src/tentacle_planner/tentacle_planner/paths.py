@@ -71,7 +71,7 @@ The most points a path file may hold; more are refused before they are parsed.
 
 A .npy's header is read first and its shape checked against this (a 176-byte file may claim
 10^12 points: loading it would allocate them). Checking and planning along a million
-points takes about 2 s here; the schedule carries a long path thinned (schedule.py).
+points takes about 2 s here; the schedule carries a long path thinned (schedule_writer.py).
 """
 UNITS_M = {'m': 1.0, 'mm': 1e-3, 'um': 1e-6}
 SLICER_TYPES = ('Curve', 'Fiducial')  # Fiducial: Slicer's name for a point list

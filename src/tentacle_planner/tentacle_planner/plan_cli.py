@@ -16,7 +16,7 @@ naming what was left out (dense playback, the robustness report, the re-check), 
 so; before that, or while the files are written, nothing is written, and that is said. A
 run replaces the previous run's schedule.yaml and plan.png in DIR: each is written under a
 temporary name and renamed, and the previous picture is removed before the new schedule
-goes in, so DIR never holds two runs' files (schedule.py).
+goes in, so DIR never holds two runs' files (schedule_writer.py).
 """
 
 import argparse
@@ -176,7 +176,7 @@ def main(args=None):
         # Imported here, where Ctrl-C is handled: numpy, scipy, numba and matplotlib take
         # most of the first second.
         from tentacle_planner.planner import plan_scene
-        from tentacle_planner.schedule import OUTPUTS
+        from tentacle_planner.schedule_writer import OUTPUTS
         problem = output_problem(opts.out, OUTPUTS)
         if problem:
             _say(f'--out {problem}')
@@ -199,7 +199,8 @@ def main(args=None):
 
 def _write(out, result):
     """Write the outputs and the summary; return the exit code."""
-    from tentacle_planner.schedule import summary, write_plot, write_schedule_file
+    from tentacle_planner.plan_plot import write_plot
+    from tentacle_planner.schedule_writer import summary, write_schedule_file
     written, interrupted = [], result.interrupted
     try:
         written.append(write_schedule_file(out, result))

@@ -53,6 +53,7 @@ from tentacle_model.tentacle_spec import load_tentacle, SpecError, TentacleSpec
 from tentacle_model.user_files import FieldReader, load_yaml, read_capped
 from tentacle_planner import paths
 from tentacle_planner.errors import PlanInputError
+from tentacle_planner.schedule_file import ModelSettings, read_model_settings
 import yaml
 
 MAX_FILE_BYTES = 64 * 1024  # as a tentacle file: PyYAML takes up to a second on this much
@@ -61,7 +62,6 @@ TOP_KEYS = ('name', 'tentacle', 'path', 'insertion_steps_m', 'playback_step_m', 
 REQUIRED_KEYS = ('tentacle', 'insertion_steps_m')
 COIL_PATH_STEP_M = 0.25e-3  # the points of a coiling target, this far apart
 COIL_KEYS = ('max_field_t', 'max_total_field_t', 'max_field_change_t')
-MODEL_KEYS = ('dof', 'sublinks', 'gravity_m_s2', 'dipoles')
 MAGNETISATION_KEYS = ('planar', 'max_neighbour_angle_deg', 'distal_axial', 'given')
 MIN_STEP_M = 1e-5
 """
@@ -94,16 +94,6 @@ class Wall:
     """Points on a wall the body keeps off, rig frame."""
 
     points_m: np.ndarray   # (k, 3)
-
-
-@dataclass(frozen=True)
-class ModelSettings:
-    """What the scene's forward model includes (tentacle_model.model.TentacleModel)."""
-
-    dof: int = 3
-    sublinks: int = 1
-    gravity_m_s2: tuple = (0.0, 0.0, 0.0)
-    dipoles: bool = False
 
 
 @dataclass(frozen=True)
@@ -168,10 +158,7 @@ class Scene:
 
     def tentacle_model(self, **options):
         """Return a TentacleModel of the scene's tentacle and model settings (options override)."""
-        settings = {'dof': self.model.dof, 'sublinks': self.model.sublinks,
-                    'gravity_m_s2': self.model.gravity_m_s2, 'dipoles': self.model.dipoles}
-        settings.update(options)
-        return TentacleModel(self.tentacle, **settings)
+        return TentacleModel(self.tentacle, **{**self.model.as_options(), **options})
 
 
 def coiling_path(spec, straight_m, radius_m, side, source):
@@ -275,7 +262,7 @@ def parse_scene(document, source, sha256=''):
     if not isinstance(name, str) or not name.strip():
         read.fail('name', f'expected a non-empty string, got {name!r}')
     tentacle_file, spec = _tentacle(read, doc['tentacle'], source)
-    model = _model(read, doc.get('model', {}))
+    model = read_model_settings(read, doc.get('model', {}))
     if ('path' in doc) == ('coiling' in doc):
         read.fail('top level', 'give either path (a centreline to follow) or coiling (coil '
                   'past the backbone, with backbone_steps_m)')
@@ -338,21 +325,6 @@ def _tentacle(read, value, source):
         return file, load_tentacle(file)
     except SpecError as exc:
         read.fail('tentacle', str(exc))
-
-
-def _model(read, raw):
-    raw = read.mapping(raw, 'model', MODEL_KEYS)
-    dof = raw.get('dof', 3)
-    if isinstance(dof, bool) or dof not in (1, 3):
-        read.fail('model.dof', f'expected 1 (planar joints) or 3 (bend, bend, twist), got '
-                  f'{dof!r}')
-    sublinks = raw.get('sublinks', 1)
-    if isinstance(sublinks, bool) or not isinstance(sublinks, int) or sublinks < 1:
-        read.fail('model.sublinks', f'expected a whole number >= 1, got {sublinks!r}')
-    gravity = raw.get('gravity_m_s2', [0.0, 0.0, 0.0])
-    gravity = tuple(float(g) for g in read.vector(gravity, 'model.gravity_m_s2'))
-    dipoles = read.flag(raw.get('dipoles', False), 'model.dipoles')
-    return ModelSettings(int(dof), sublinks, gravity, dipoles)
 
 
 def _backbone_steps(read, doc, spec):

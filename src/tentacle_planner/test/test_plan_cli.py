@@ -10,7 +10,8 @@ from tentacle_planner.optimise import Constraints, optimise, Problem
 from tentacle_planner.paths import shape_error
 from tentacle_planner.planner import plan_scene
 from tentacle_planner.scene import load_scene
-from tentacle_planner.schedule import FORMAT, schedule_document
+from tentacle_planner.schedule_file import FORMAT
+from tentacle_planner.schedule_writer import schedule_document
 import yaml
 
 ROOT = pathlib.Path(__file__).resolve().parents[3]

@@ -18,6 +18,24 @@ def _distances(points_m, starts_m, ends_m):
     return np.linalg.norm(ap - t[..., None] * ab[None], axis=2)
 
 
+def link_gaps(points_m, link_radii_m, spheres=(), walls=()):
+    """
+    Return (n, m): each link's smallest surface-to-surface gap to each obstacle, then wall, m.
+
+    :param points_m: (n + 1, 3) the body's joints and tip
+    :param link_radii_m: (n,) each link's section radius, m
+    :param spheres: scene.Sphere obstacles (the first columns)
+    :param walls: scene.Wall point sets (the last columns)
+    """
+    points = np.asarray(points_m, dtype=float)
+    radii = np.asarray(link_radii_m, dtype=float)
+    a, b = points[:-1], points[1:]
+    columns = [_distances(sphere.centre_m[None], a, b)[0] - radii - sphere.radius_m
+               for sphere in spheres]
+    columns += [np.min(_distances(wall.points_m, a, b), axis=0) - radii for wall in walls]
+    return np.column_stack(columns) if columns else np.zeros((len(radii), 0))
+
+
 def clearance(points_m, link_radii_m, spheres=(), walls=()):
     """
     Return (gap, what): the smallest surface-to-surface gap of the body, m, and what it is to.
@@ -28,14 +46,10 @@ def clearance(points_m, link_radii_m, spheres=(), walls=()):
     :param walls: scene.Wall point sets
     :return: (inf, None) without obstacles; what is 'obstacle i' or 'wall i', from 1
     """
-    points = np.asarray(points_m, dtype=float)
-    radii = np.asarray(link_radii_m, dtype=float)
-    a, b = points[:-1], points[1:]
-    best = (float('inf'), None)
-    for i, sphere in enumerate(spheres):
-        gaps = _distances(sphere.centre_m[None], a, b)[0] - radii - sphere.radius_m
-        best = min(best, (float(np.min(gaps)), f'obstacle {i + 1}'), key=lambda g: g[0])
-    for i, wall in enumerate(walls):
-        gaps = _distances(wall.points_m, a, b) - radii[None]
-        best = min(best, (float(np.min(gaps)), f'wall {i + 1}'), key=lambda g: g[0])
-    return best
+    gaps = link_gaps(points_m, link_radii_m, spheres, walls)
+    if gaps.size == 0:
+        return float('inf'), None
+    least = np.min(gaps, axis=0)
+    k = int(np.argmin(least))
+    what = f'obstacle {k + 1}' if k < len(spheres) else f'wall {k - len(spheres) + 1}'
+    return float(least[k]), what

@@ -3,7 +3,8 @@ How a plan fares when the real tentacle or rig is not the model: perturbed model
 
 The thesis puts its remaining navigation error on an imprecisely placed insertion point
 and on model error. Each perturbation below is a model of the same knobs with one thing
-changed; a plan (its magnetisation and fields) is played in each, warm-started along the
+changed (mismatch.perturbed: the knobs a scene's mismatch block turns for the simulated
+rig); a plan (its magnetisation and fields) is played in each, warm-started along the
 insertion, and its shape error per step reported. ``RobustProblem`` plans against all of
 them at once: its residuals stack every perturbed model's, so the fit minimises the sum of
 their squared errors, which bounds the worst one (reported beside the nominal).
@@ -14,6 +15,7 @@ import math
 
 import numpy as np
 from tentacle_model.model import TentacleModel
+from tentacle_planner.mismatch import perturbed
 from tentacle_planner.optimise import Problem
 
 PERTURBATIONS = (
@@ -24,27 +26,6 @@ PERTURBATIONS = (
     ('insertion point 0.5 mm sideways', {'sideways_m': 0.5e-3}),
     ('base direction turned 2 deg', {'turn_rad': math.radians(2.0)}),
 )
-
-
-def perturbed(spec, stiffness=1.0, remanence=1.0, sideways_m=0.0, turn_rad=0.0):
-    """
-    Return a TentacleSpec with one or more things changed.
-
-    :param stiffness: factor on every modulus (and the backbone's stiffness)
-    :param remanence: factor on every magnetisation
-    :param sideways_m: the insertion point moved along the base-plane normal, m
-    :param turn_rad: the base direction turned in the base plane (about the base z), rad
-    """
-    segments = tuple(replace(s, modulus_pa=tuple(stiffness * m for m in s.modulus_pa),
-                             magnetisation_a_per_m=remanence * s.magnetisation_a_per_m)
-                     for s in spec.segments)
-    backbone = None if spec.backbone is None else replace(
-        spec.backbone, stiffness_n_m2=stiffness * spec.backbone.stiffness_n_m2)
-    c, s = math.cos(turn_rad), math.sin(turn_rad)
-    turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return replace(spec, segments=segments, backbone=backbone,
-                   base_position_m=spec.base_position_m + sideways_m * spec.base_rotation[:, 1],
-                   base_rotation=spec.base_rotation @ turn)
 
 
 def variant(model, spec):

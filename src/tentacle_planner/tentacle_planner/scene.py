@@ -13,6 +13,10 @@ Scene files (DESIGN.md, "Scenes and schedules"): what a plan is made for, valida
     model: {dof: 3, sublinks: 1, gravity_m_s2: [0, 0, 0], dipoles: false}
     magnetisation: {planar: false, max_neighbour_angle_deg: 60, distal_axial: false,
                     given: false}           # given: the tentacle file's directions, fields only
+    mismatch: {stiffness_factor: 0.9, remanence_factor: 1.05, insertion_offset_m: [0, 3e-4, 0],
+               insertion_angle_deg: 1.5, actuation_matrix_factor: [1.03, 0.97, 1.0]}
+                                            # the simulated rig only (mismatch.py): the plan
+                                            # is made for the tentacle file as it is
 
 A backbone schedule (thesis chapter 6; beyond DESIGN.md's keys, which it keeps) replaces the
 path with a coiling target and moves the backbone instead of the body::
@@ -53,12 +57,13 @@ from tentacle_model.tentacle_spec import load_tentacle, SpecError, TentacleSpec
 from tentacle_model.user_files import FieldReader, load_yaml, read_capped
 from tentacle_planner import paths
 from tentacle_planner.errors import PlanInputError
+from tentacle_planner.mismatch import Mismatch, read_mismatch
 from tentacle_planner.schedule_file import ModelSettings, read_model_settings
 import yaml
 
 MAX_FILE_BYTES = 64 * 1024  # as a tentacle file: PyYAML takes up to a second on this much
 TOP_KEYS = ('name', 'tentacle', 'path', 'insertion_steps_m', 'playback_step_m', 'coil',
-            'obstacles', 'model', 'magnetisation', 'backbone_steps_m', 'coiling')
+            'obstacles', 'model', 'magnetisation', 'backbone_steps_m', 'coiling', 'mismatch')
 REQUIRED_KEYS = ('tentacle', 'insertion_steps_m')
 COIL_PATH_STEP_M = 0.25e-3  # the points of a coiling target, this far apart
 COIL_KEYS = ('max_field_t', 'max_total_field_t', 'max_field_change_t')
@@ -126,6 +131,7 @@ class Scene:
     backbone_steps_m: tuple | None = None   # the backbone's reach past the base per key step
     coiling_radius_m: float | None = None   # the target coils at this radius past the backbone
     coiling_side: int = 1                   # +1: towards the base normal (link y), -1: away
+    mismatch: Mismatch = Mismatch()         # how the simulated rig differs from the model
     _coil_paths: dict = field(default_factory=dict, repr=False)  # backbone m -> Path, built once
 
     def target_path(self, inserted_m, backbone_m=0.0):
@@ -313,8 +319,9 @@ def parse_scene(document, source, sha256=''):
     for index, sphere in enumerate(spheres):
         _check_clear(read, path, sphere, index)
     magnetisation = _magnetisation(read, doc.get('magnetisation', {}))
+    mismatch = read_mismatch(read, doc.get('mismatch', {}))
     return Scene(name, source, sha256, tentacle_file, spec, path, steps, playback, coil,
-                 spheres, walls, model, magnetisation, backbones, *coiling)
+                 spheres, walls, model, magnetisation, backbones, *coiling, mismatch=mismatch)
 
 
 def _tentacle(read, value, source):

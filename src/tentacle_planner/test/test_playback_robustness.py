@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from tentacle_model.model import TentacleModel
 from tentacle_model.tentacle_spec import load_tentacle
+from tentacle_planner.mismatch import perturbed
 from tentacle_planner.optimise import Constraints, optimise, Plan, Problem
 from tentacle_planner.playback import dense_lengths, playback
-from tentacle_planner.mismatch import perturbed
 from tentacle_planner.robustness import perturbed_problems, report, RobustProblem
 
 ROOT = pathlib.Path(__file__).resolve().parents[3]

@@ -6,33 +6,15 @@ import time
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_bvp
 from tentacle_model import planar
 from tentacle_model.chain import discretise
+from tentacle_model.elastica import cantilever_tip as elastica_tip
 from tentacle_model.statics import compile_kernels, solve, solve_planar
 
 
 def field(magnitude_t, degrees):
     phi = np.radians(degrees)
     return magnitude_t * np.array([np.cos(phi), np.sin(phi), 0.0])
-
-
-def elastica_tip(length, ei, ma, b_t, degrees):
-    """Tip (x, y) of E I theta'' + M A B sin(phi - theta) = 0, theta(0) = 0, theta'(L) = 0."""
-    phi, c = np.radians(degrees), ma * b_t / ei
-
-    def rhs(s, y):
-        return np.vstack([y[1], -c * np.sin(phi - y[0]), np.cos(y[0]), np.sin(y[0])])
-
-    def bc(ya, yb):
-        return np.array([ya[0], yb[1], ya[2], ya[3]])
-
-    s = np.linspace(0, length, 400)
-    bend = 1.5 * np.sin(np.pi * s / (2 * length))  # a buckled guess, bending towards +y
-    guess = np.vstack([bend, np.gradient(bend, s), s, np.zeros_like(s)])
-    sol = solve_bvp(rhs, bc, s, guess, tol=1e-8, max_nodes=200000)
-    assert sol.status == 0, sol.message
-    return sol.y[2:, -1]
 
 
 def test_small_deflection_matches_thesis_eq_2_3(cantilever):

@@ -26,12 +26,12 @@ def write_coils_params(base_yaml, out_path, **overrides):
 class NodeProcess:
     """A node in its own process, its output collected in a file."""
 
-    def __init__(self, argv, log_path, cwd=None):
-        """Start argv; stdout and stderr go to log_path."""
+    def __init__(self, argv, log_path, cwd=None, env=None):
+        """Start argv (in a session of its own); stdout and stderr go to log_path."""
         self.log_path = log_path
         self._log = open(log_path, 'w')
         self.popen = subprocess.Popen(argv, stdout=self._log, stderr=subprocess.STDOUT,
-                                      cwd=cwd, start_new_session=True)
+                                      cwd=cwd, env=env, start_new_session=True)
 
     def output(self):
         """Return everything the process printed so far."""

@@ -167,6 +167,11 @@ class GcodeStage(PtyDevice):
                     'motor_on': self.motor_on, 'steps_per_mm': self.axis.steps_per_m * 1e-3,
                     'received': len(self.log), 'pending_faults': self.pending_faults()}
 
+    def travel_m(self):
+        """Return where the physical axis is now, m (the firmware's zero does not move it)."""
+        with self._state_lock:
+            return self.axis.where(time.monotonic())[0]
+
     # -- the firmware -----------------------------------------------------------------------
     def frame(self, buf):
         """Return (what, n): a line to its terminator (a runaway line is dropped)."""

@@ -153,7 +153,8 @@ class Renderer:
 
     def __init__(self, pixel_map, size=(2048, 1536), *, background=200.0, body=60.0,
                  magnet=25.0, lighting=0.25, noise_sigma=3.0, blur_px=0.8,
-                 phantom_m=None, phantom_width_m=0.006, seed=0):
+                 phantom_m=None, phantom_width_m=0.006, obstacles_m=(), walls_m=(),
+                 wall_width_m=3e-4, seed=0):
         """
         Set up the constant parts.
 
@@ -166,6 +167,8 @@ class Renderer:
         :param blur_px: Gaussian blur of the body's edges (the optics), px
         :param phantom_m: a channel centreline (N, 2), m, drawn as a lighter channel with
             darker walls behind the body; None: no phantom
+        :param obstacles_m: ((centre (2,), radius), ...) discs, m, drawn as darker phantom
+        :param walls_m: ((k, 2) polylines, ...), m, drawn wall_width_m wide, as darker phantom
         """
         self.map, self.size = pixel_map, tuple(size)
         self.body, self.magnet, self.blur_px = float(body), float(magnet), float(blur_px)
@@ -179,6 +182,19 @@ class Renderer:
             _fill(walls, _quads(path, width_px + 6.0))
             _fill(channel, _quads(path, width_px))
             bg = bg * (1.0 - 0.25 * walls) + 0.25 * background * channel
+        if len(obstacles_m) or len(walls_m):
+            solid = np.zeros(bg.shape, np.float32)
+            for centre, radius in obstacles_m:
+                centre_px = self.map.to_pixels(np.asarray(centre, float).reshape(1, 2))[0]
+                radius_px = radius / self.map.metres_per_px_at(centre_px)
+                turn = np.linspace(0.0, 2 * np.pi, max(int(2 * np.pi * radius_px / 2), 16))
+                ring = centre_px + 0.5 * radius_px * np.column_stack([np.cos(turn),
+                                                                       np.sin(turn)])
+                _fill(solid, _quads(ring, radius_px))   # a ring as wide as the radius: a disc
+            for wall in (w for w in walls_m if len(w) >= 2):
+                line = self.map.to_pixels(resample(np.asarray(wall, float), 2e-4))
+                _fill(solid, _quads(line, wall_width_m / self.map.metres_per_px_at(line[0])))
+            bg = bg * (1.0 - 0.25 * solid)
         self.background = np.clip(bg, 0, 255).astype(np.uint8)
         self.noise = []
         if noise_sigma > 0:

@@ -1,0 +1,209 @@
+"""
+The rig's process table: which nodes run, with what parameters, started and stopped in order.
+
+One table for the simulated rig (``sim_table``: sim_node, then coils_node, inserter_node,
+backbone_node where the scene has a backbone, tracker_node, each on config/sim/*.yaml) and
+the real one (``real_table``: the same drivers on a lab's params files). ``Rig`` starts each
+entry as its own process, as deployed (``python -m``, its own session: a Ctrl-C at the
+terminal reaches the bringup only, which stops the rest in order), waits for the simulator's
+device links before the drivers open them, and stops the drivers first (the supplies at
+zero and off, the axes stopped, each confirmed by the driver's last line), then the
+watchers, then the simulator. scripts/rig runs it; the tests and benches start the rig with
+it too, so the table they test is the one a lab runs.
+"""
+
+from dataclasses import dataclass
+import pathlib
+import signal
+import sys
+import time
+
+from tentacle_common.contract import axis_node_name
+from tentacle_sim.params import DEFAULT_DEVICE_DIR, NODE_NAME
+from tentacle_sim.sim_devices import CONTROL
+from tentacle_sim.sim_rig import NodeProcess
+import yaml
+
+STOP_ORDER = ('driver', 'watcher', 'sim')   # what stops first
+CONFIRMED = {'coils_node': 'outputs zero and off', 'inserter_node': 'axis stopped',
+             'backbone_node': 'axis stopped'}   # the line a driver ends with when safe
+DRIVER_STOP_S = 40.0   # a ramp to zero at the slowest slew, and its read-back
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One process of the table."""
+
+    name: str                 # the node name (its log file, its line at exit)
+    module: str               # run as python -m module
+    args: tuple = ()          # after the module: --ros-args ...
+    role: str = 'driver'      # 'sim', 'driver' (stopped first, confirmed) or 'watcher'
+
+
+def _ros_args(params_file, node_name=None, **overrides):
+    args = ['--ros-args', *(('-r', f'__node:={node_name}') if node_name else ()),
+            '--params-file', str(params_file)]
+    for name, value in overrides.items():
+        args += ['-p', f'{name}:={value}']
+    return tuple(args)
+
+
+def scene_has_backbone(scene_file):
+    """Return whether a scene's tentacle has a backbone (a backbone stage to run)."""
+    from tentacle_planner.scene import load_scene
+    return load_scene(scene_file).tentacle.backbone is not None
+
+
+def sim_table(scene_file, root, device_dir=None, tracker=True, **sim_params):
+    """
+    Return the simulated rig's entries: sim_node and the drivers on config/sim/*.yaml.
+
+    :param scene_file: the scene sim_node simulates
+    :param root: the project root (config/sim lives there)
+    :param device_dir: sim_node's device folder (default config/sim's, /tmp/tentacle_sim);
+        the drivers' ports follow it
+    :param tracker: run tracker_node on the simulated camera
+    :param sim_params: more sim_node parameters (e.g. camera_rate)
+    """
+    sim_dir = pathlib.Path(root) / 'config' / 'sim'
+    ports = {}
+    if device_dir is not None:
+        sim_params['device_dir'] = str(device_dir)
+        ports = {'coils': {'ports': '[' + ','.join(f'{device_dir}/coil_{a}' for a in 'xyz')
+                           + ']'},
+                 'inserter': {'port': f'{device_dir}/inserter'},
+                 'backbone': {'port': f'{device_dir}/backbone'}}
+    table = [Entry('sim_node', 'tentacle_sim.sim_node',
+                   _ros_args(sim_dir / 'sim.yaml', scene=scene_file, **sim_params), 'sim'),
+             Entry('coils_node', 'tentacle_coils.coils_node',
+                   _ros_args(sim_dir / 'coils.yaml', **ports.get('coils', {}))),
+             Entry('inserter_node', 'tentacle_inserter.inserter_node',
+                   _ros_args(sim_dir / 'inserter.yaml', **ports.get('inserter', {})))]
+    if scene_has_backbone(scene_file):
+        table.append(Entry('backbone_node', 'tentacle_inserter.inserter_node',
+                           _ros_args(sim_dir / 'backbone.yaml', axis_node_name('backbone'),
+                                     **ports.get('backbone', {}))))
+    if tracker:
+        table.append(Entry('tracker_node', 'tentacle_vision.tracker_node',
+                           _ros_args(sim_dir / 'tracker.yaml', **_camera_of(sim_params)),
+                           'watcher'))
+    return table
+
+
+def _camera_of(sim_params):
+    """Return the tracker's overrides matching sim_node's camera overrides."""
+    return {k: sim_params[k] for k in ('base_px', 'metres_per_px') if k in sim_params}
+
+
+def real_table(config_dir):
+    """
+    Return the real rig's entries: each driver whose params file is in config_dir.
+
+    coils.yaml (coils_node), inserter.yaml (inserter_node), backbone.yaml (backbone_node),
+    camera.yaml (camera_node), tracker.yaml (tracker_node).
+
+    :raises FileNotFoundError: the folder has none of them
+    """
+    folder = pathlib.Path(config_dir)
+    rows = [('coils.yaml', 'coils_node', 'tentacle_coils.coils_node', None, 'driver'),
+            ('inserter.yaml', 'inserter_node', 'tentacle_inserter.inserter_node', None,
+             'driver'),
+            ('backbone.yaml', 'backbone_node', 'tentacle_inserter.inserter_node',
+             axis_node_name('backbone'), 'driver'),
+            ('camera.yaml', 'camera_node', 'tentacle_vision.camera_node', None, 'watcher'),
+            ('tracker.yaml', 'tracker_node', 'tentacle_vision.tracker_node', None, 'watcher')]
+    table = [Entry(name, module, _ros_args(folder / file, node_name), role)
+             for file, name, module, node_name, role in rows if (folder / file).is_file()]
+    if not table:
+        raise FileNotFoundError(f'{folder}: none of coils.yaml, inserter.yaml, backbone.yaml, '
+                                'camera.yaml, tracker.yaml')
+    return table
+
+
+def device_dir_of(entry):
+    """Return the device folder a sim_node entry will link its devices into."""
+    found, args = DEFAULT_DEVICE_DIR, list(entry.args)
+    for flag, value in zip(args, args[1:]):   # a later one wins, as with rcl
+        if flag == '--params-file':
+            document = yaml.safe_load(pathlib.Path(value).read_text()) or {}
+            found = document.get(NODE_NAME, {}).get('ros__parameters', {}).get(
+                'device_dir', found)
+        elif flag == '-p' and value.startswith('device_dir:='):
+            found = value.split(':=', 1)[1]
+    return pathlib.Path(found)
+
+
+class RigError(RuntimeError):
+    """A process of the table did not come up."""
+
+
+class Rig:
+    """The processes of a table, started in order, stopped drivers first."""
+
+    def __init__(self, table, log_dir, cwd=None, say=print, ready_timeout_s=60.0):
+        """
+        Start every entry; wait for the simulator's devices before the drivers.
+
+        :param log_dir: each process's output goes to log_dir/<name>.log
+        :param say: where progress lines go (a callable taking one line)
+        :raises RigError: the simulator died or linked no devices in ready_timeout_s (every
+            process started so far is stopped again)
+        """
+        self.log_dir = pathlib.Path(log_dir)
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        self.say, self.processes = say, []
+        try:
+            for entry in table:
+                process = NodeProcess([sys.executable, '-m', entry.module, *entry.args],
+                                      str(self.log_dir / f'{entry.name}.log'), cwd)
+                self.processes.append((entry, process))
+                say(f'rig: started {entry.name} (pid {process.popen.pid})')
+                if entry.role == 'sim':
+                    self._wait_for_devices(entry, process, ready_timeout_s)
+        except BaseException:
+            self.stop()
+            raise
+
+    def _wait_for_devices(self, entry, process, timeout_s):
+        control = device_dir_of(entry) / CONTROL
+        deadline = time.monotonic() + timeout_s
+        while True:
+            if process.popen.poll() is not None:
+                raise RigError(f'{entry.name} exited ({process.popen.returncode}):\n'
+                               + process.output()[-2000:])
+            if control.exists():
+                return
+            if time.monotonic() > deadline:  # checked once more above, at the deadline
+                raise RigError(f'{entry.name}: no devices in {control.parent} after '
+                               f'{timeout_s:g} s:\n' + process.output()[-2000:])
+            time.sleep(0.05)
+
+    def process(self, name):
+        """Return the NodeProcess of a name."""
+        return next(p for e, p in self.processes if e.name == name)
+
+    def alive(self):
+        """Return the names of the processes still running."""
+        return [e.name for e, p in self.processes if p.popen.poll() is None]
+
+    def stop(self, sig=signal.SIGINT):
+        """
+        Stop the drivers (each confirming its safe state), the watchers, then the simulator.
+
+        :return: [(name, exit code, its last line, confirmed safe)] in stopping order
+        """
+        report = []
+        for role in STOP_ORDER:
+            for entry, process in reversed([(e, p) for e, p in self.processes
+                                            if e.role == role]):
+                code = process.stop(sig, DRIVER_STOP_S if role == 'driver' else 10.0)
+                lines = [line for line in process.output().splitlines()
+                         if line.startswith(f'{entry.name}: ')]
+                last = lines[-1] if lines else '(no last line)'
+                safe = entry.name not in CONFIRMED or (CONFIRMED[entry.name] in last
+                                                       and code == 0)
+                report.append((entry.name, code, last, safe))
+                self.say(f'rig: {entry.name} stopped (exit {code}): {last}'
+                         + ('' if safe else '  <-- NOT CONFIRMED SAFE'))
+        self.processes = []
+        return report

@@ -65,7 +65,7 @@ class SimProbe:
             fresh = [m for t, m in self.got[key] if t >= since]
         return fresh[-1] if fresh else None
 
-    def all(self, key, since=0.0):
+    def every(self, key, since=0.0):
         """Return every kept message of a kind received after a monotonic time."""
         with self.lock:
             return [m for t, m in self.got[key] if t >= since]

@@ -66,20 +66,20 @@ def rig(tmp_path_factory):
 
 
 def settled(probe, since, check=lambda points: True, timeout_s=15.0):
-    """
-    Wait for a steady /sim/shape after since (its tip moved < 1 um since the one before)
-    that passes check(points); return its points.
-    """
+    """Wait for a steady /sim/shape after since that passes check(points); return it."""
+    # Steady: its tip moved less than 1 um since the shape before.
     found = []
 
     def ok():
-        shapes = [points_of(m) for m in probe.all('shape', since)[-2:]]
+        shapes = [points_of(m) for m in probe.every('shape', since)[-2:]]
         if len(shapes) == 2 and len(shapes[0]) == len(shapes[1]) and np.linalg.norm(
                 shapes[1][-1] - shapes[0][-1]) < 1e-6 and check(shapes[1]):
             found[:] = [shapes[1]]
             return True
         return False
-    assert wait_for(ok, timeout_s), f'last shape: {probe.shape(since)}'
+    assert wait_for(ok, timeout_s), (
+        f'{len(probe.every("shape", since))} shapes, the last two tips: '
+        f'{[points_of(m)[-1] for m in probe.every("shape", since)[-2:]]}')
     return found[0]
 
 
@@ -100,10 +100,101 @@ def test_a_held_field_bends_the_body_as_the_elastica_says(rig):
 def test_the_tracker_finds_the_rendered_tip_within_0_3_mm_of_the_truth(rig):
     probe, _, _ = rig
     since = time.monotonic()
-    assert wait_for(lambda: len(probe.all('tip', since)) >= 5, 20.0)
-    truth = {stamp_s(m): points_of(m)[-1] for m in probe.all('shape', since - 5.0)}
-    pairs = [(m, truth[stamp_s(m)]) for m in probe.all('tip', since) if stamp_s(m) in truth]
+    assert wait_for(lambda: len(probe.every('tip', since)) >= 5, 20.0)
+    truth = {stamp_s(m): points_of(m)[-1] for m in probe.every('shape', since - 5.0)}
+    pairs = [(m, truth[stamp_s(m)]) for m in probe.every('tip', since) if stamp_s(m) in truth]
     assert pairs, 'no /vision/tip with the stamp of a /sim/shape'
     for tip, true in pairs:   # the insertion point is the coil centre: workspace = coils xy
         seen = np.array([tip.pose.position.x, tip.pose.position.y])
         assert np.linalg.norm(seen - true[:2]) < 3e-4, (seen, true)
+
+
+def test_contact_with_the_ball_is_reported_with_the_depth_the_shape_has(rig):
+    probe, _, _ = rig
+    since = time.monotonic()
+    assert wait_for(lambda: len(probe.every('contact', since)) >= 3, 10.0)
+    shapes = {stamp_s(m): points_of(m) for m in probe.every('shape', since - 5.0)}
+    checked = 0
+    for contact in probe.every('contact', since):
+        points = shapes.get(stamp_s(contact))
+        if points is None:
+            continue
+        a, b = points[:-1], points[1:]   # each link a capsule of the rod's radius
+        t = np.clip(np.einsum('ij,ij->i', BALL_CENTRE_M - a, b - a)
+                    / np.einsum('ij,ij->i', b - a, b - a), 0.0, 1.0)
+        gaps = np.linalg.norm(a + t[:, None] * (b - a) - BALL_CENTRE_M, axis=1) - (
+            RADIUS_M + BALL_RADIUS_M)
+        assert dict(zip(contact.name, contact.position)) == pytest.approx(
+            {'count': np.count_nonzero(gaps < 0), 'depth': -gaps.min()}, abs=1e-9)
+        assert contact.position[0] >= 1 and contact.header.frame_id == 'coils'
+        checked += 1
+    assert checked
+
+
+def test_a_field_step_shows_in_the_shape_within_a_second(rig):
+    probe, _, _ = rig
+    before = settled(probe, time.monotonic())[-1]
+    commanded = time.time()
+    probe.command_field([0.0, FIELD_T / 2, 0.0])
+    since = time.monotonic()
+    assert wait_for(lambda: any(np.linalg.norm(points_of(m)[-1] - before) > 1e-4
+                                for m in probe.every('shape', since)), 10.0)
+    first = next(m for m in probe.every('shape', since)
+                 if np.linalg.norm(points_of(m)[-1] - before) > 1e-4)
+    assert stamp_s(first) - commanded < 1.0   # the command, the supplies' slew, the solve
+
+
+def test_a_stalled_stage_stops_the_insertion_where_it_stalled(rig):
+    probe, devices, _ = rig
+    probe.command_field([0.0, 0.0, 0.0])
+    probe.target(0.005)
+    settled(probe, time.monotonic(), lambda p: arc_length_m(p) == pytest.approx(0.005, abs=1e-5))
+    ask(devices, {'op': 'fault', 'port': 'inserter', 'kind': 'stall', 'after_m': 0.006})
+    probe.target(LENGTH_M)
+    # The driver finds the move never ends, stops the axis and says so, as on the rig.
+    node = rig[2].process('inserter_node')
+    assert wait_for(lambda: 'did not finish' in node.output(), 30.0), node.output()
+    points = settled(probe, time.monotonic())
+    assert arc_length_m(points) == pytest.approx(0.011, abs=2e-5)   # where it stalled
+    # Stopped unhomed, as a stall leaves an axis: zero where it stands, then in all the way.
+    assert probe.home()
+    probe.target(LENGTH_M - 0.011)
+    settled(probe, time.monotonic(),
+            lambda p: arc_length_m(p) == pytest.approx(LENGTH_M, abs=1e-5))
+
+
+def test_estop_brings_the_supplies_to_zero_and_the_body_relaxes_straight(rig):
+    probe, devices, _ = rig
+    probe.command_field([0.0, FIELD_T, 0.0])
+    settled(probe, time.monotonic(), lambda p: p[-1, 1] > 0.01)
+    probe.estop(True)
+    try:
+        # The currents read from the supplies themselves: the physics saw the real ones.
+        assert wait_for(lambda: all(abs(s['current_a']) < 1e-3 and not s['output_on']
+                                    for s in ask(devices, {'op': 'state'}).values()
+                                    if 'current_a' in s), 10.0)
+        points = settled(probe, time.monotonic(), lambda p: abs(p[-1, 1]) < 1e-6)
+        assert points[-1, 0] == pytest.approx(LENGTH_M, abs=1e-6)   # straight along x
+        assert probe.latest('contact').position[0] == 0
+    finally:
+        probe.estop(False)
+    assert wait_for(lambda: probe.enable_coils(True), 10.0)
+
+
+def test_a_supply_whose_line_is_lost_keeps_its_current_and_the_body_stays_bent(rig):
+    probe, devices, _ = rig
+    probe.command_field([0.0, FIELD_T, 0.0])
+    assert wait_for(lambda: abs(supply(devices, 'y')['current_a'] - Y_AMPS) < 0.01, 10.0)
+    ask(devices, {'op': 'fault', 'port': 'coil_y', 'kind': 'disconnect', 'duration_s': 6.0})
+    since = time.monotonic()
+    # The driver reports the loss, as on the rig ...
+    assert wait_for(lambda: (s := probe.status('coils: supply y', since)) is not None
+                    and 'disconnected' in s[1], 10.0), probe.status('coils: supply y')
+    # ... while the supply, out of its reach, goes on driving the coil: the body stays bent.
+    assert supply(devices, 'y')['current_a'] == pytest.approx(Y_AMPS, abs=0.01)
+    points = settled(probe, time.monotonic())
+    assert np.linalg.norm(points[-1, :2] - TIP_M) < 0.02 * LENGTH_M
+    # Reconnected, the driver finds it holding current and drives it to zero.
+    assert wait_for(lambda: abs(supply(devices, 'y')['current_a']) < 1e-3, 20.0)
+    settled(probe, time.monotonic(), lambda p: abs(p[-1, 1]) < 1e-6)
+    assert wait_for(lambda: probe.enable_coils(True), 10.0)

@@ -184,13 +184,12 @@ class Renderer:
             bg = bg * (1.0 - 0.25 * walls) + 0.25 * background * channel
         if len(obstacles_m) or len(walls_m):
             solid = np.zeros(bg.shape, np.float32)
+            v, u = np.mgrid[0:bg.shape[0], 0:bg.shape[1]].astype(np.float32)
             for centre, radius in obstacles_m:
                 centre_px = self.map.to_pixels(np.asarray(centre, float).reshape(1, 2))[0]
                 radius_px = radius / self.map.metres_per_px_at(centre_px)
-                turn = np.linspace(0.0, 2 * np.pi, max(int(2 * np.pi * radius_px / 2), 16))
-                ring = centre_px + 0.5 * radius_px * np.column_stack([np.cos(turn),
-                                                                       np.sin(turn)])
-                _fill(solid, _quads(ring, radius_px))   # a ring as wide as the radius: a disc
+                distance = np.hypot(u - centre_px[0], v - centre_px[1])
+                np.maximum(solid, np.clip(radius_px + 0.5 - distance, 0.0, 1.0), out=solid)
             for wall in (w for w in walls_m if len(w) >= 2):
                 line = self.map.to_pixels(resample(np.asarray(wall, float), 2e-4))
                 _fill(solid, _quads(line, wall_width_m / self.map.metres_per_px_at(line[0])))

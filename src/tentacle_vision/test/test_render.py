@@ -57,3 +57,18 @@ def test_bayer_mosaic_keeps_each_colour_at_its_site():
     mosaic = to_bayer_rggb(bgr)
     assert mosaic[0, 0] == bgr[0, 0, 2] and mosaic[1, 1] == bgr[1, 1, 0]
     assert mosaic[0, 1] == bgr[0, 1, 1] == mosaic[1, 0]
+
+
+def test_obstacles_and_walls_are_drawn_where_they_are():
+    pixel_map = ScaleMap(1e-4, (100, 100))   # 0.1 mm/px, the origin at (100, 100) px
+    plain = Renderer(pixel_map, (200, 200), noise_sigma=0.0, lighting=0.0).background
+    drawn = Renderer(pixel_map, (200, 200), noise_sigma=0.0, lighting=0.0,
+                     obstacles_m=[((0.003, 0.0), 0.002)],        # centre (130, 100) px, r 20
+                     walls_m=[np.array([[-0.008, -0.005], [0.008, -0.005]])]).background
+    darker = drawn.astype(int) < plain.astype(int) - 20
+    v, u = np.mgrid[0:200, 0:200]
+    disc = np.hypot(u - 130, v - 100) < 19
+    wall = (np.abs(v - 150) < 1) & (np.abs(u - 100) < 79)   # y = -5 mm is v = 150 px
+    assert darker[disc].all() and darker[wall].all()
+    away = (np.hypot(u - 130, v - 100) > 22) & (np.abs(v - 150) > 3)
+    assert not darker[away].any()

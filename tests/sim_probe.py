@@ -112,7 +112,7 @@ class SimProbe:
 
     def status(self, name, since=0.0):
         """Return (level, message, values) of the newest diagnostic status named so, or None."""
-        for array in reversed(self.all('diagnostics', since)):
+        for array in reversed(self.every('diagnostics', since)):
             for status in array.status:
                 if status.name == name:
                     return status.level, status.message, {v.key: v.value for v in status.values}

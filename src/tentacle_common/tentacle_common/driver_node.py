@@ -267,7 +267,8 @@ def run_node(argv, node_name, table, doc, make_node, stop_safely):
     :param doc: what --help prints above the table (the node module's docstring)
     :param make_node: returns the node (raising DriverError or ParameterException: exit 2)
     :param stop_safely: node -> the line printed at exit ('<node_name>: <line>'), after the
-        actuators were brought to their safe state, read back
+        actuators were brought to their safe state, read back; '<node_name>: running' is
+        printed once the node is built and spins
     """
     if wants_help(argv):
         print(f'usage: {node_name} [--ros-args --params-file FILE | -p NAME:=VALUE ...'
@@ -287,6 +288,8 @@ def run_node(argv, node_name, table, doc, make_node, stop_safely):
         node = make_node()
         for warning in warnings:
             node.get_logger().warning(warning)
+        # What a bringup waits for (tentacle_sim.bringup): built, its devices opened.
+        print(f'{node_name}: running', file=sys.stderr, flush=True)
         spin_until_signal(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass

@@ -5,8 +5,9 @@ One table for the simulated rig (``sim_table``: sim_node, then coils_node, inser
 backbone_node where the scene has a backbone, tracker_node, each on config/sim/*.yaml) and
 the real one (``real_table``: the same drivers on a lab's params files). ``Rig`` starts each
 entry as its own process, as deployed (``python -m``, its own session: a Ctrl-C at the
-terminal reaches the bringup only, which stops the rest in order), waits for the simulator's
-device links before the drivers open them, and stops the drivers first (the supplies at
+terminal reaches the bringup only, which stops the rest in order), starts each once the one
+before says it runs (so the simulator's devices are linked before the drivers open them),
+and stops the drivers first (the supplies at
 zero and off, the axes stopped, each confirmed by the driver's last line), then the
 watchers, then the simulator. scripts/rig runs it; the tests and benches start the rig with
 it too, so the table they test is the one a lab runs.
@@ -19,10 +20,7 @@ import sys
 import time
 
 from tentacle_common.contract import axis_node_name
-from tentacle_sim.params import DEFAULT_DEVICE_DIR, NODE_NAME
-from tentacle_sim.sim_devices import CONTROL
 from tentacle_sim.sim_rig import NodeProcess
-import yaml
 
 STOP_ORDER = ('driver', 'watcher', 'sim')   # what stops first
 CONFIRMED = {'coils_node': 'outputs zero and off', 'inserter_node': 'axis stopped',
@@ -120,19 +118,6 @@ def real_table(config_dir):
     return table
 
 
-def device_dir_of(entry):
-    """Return the device folder a sim_node entry will link its devices into."""
-    found, args = DEFAULT_DEVICE_DIR, list(entry.args)
-    for flag, value in zip(args, args[1:]):   # a later one wins, as with rcl
-        if flag == '--params-file':
-            document = yaml.safe_load(pathlib.Path(value).read_text()) or {}
-            found = document.get(NODE_NAME, {}).get('ros__parameters', {}).get(
-                'device_dir', found)
-        elif flag == '-p' and value.startswith('device_dir:='):
-            found = value.split(':=', 1)[1]
-    return pathlib.Path(found)
-
-
 class RigError(RuntimeError):
     """A process of the table did not come up."""
 
@@ -140,14 +125,18 @@ class RigError(RuntimeError):
 class Rig:
     """The processes of a table, started in order, stopped drivers first."""
 
-    def __init__(self, table, log_dir, cwd=None, say=print, ready_timeout_s=60.0):
+    def __init__(self, table, log_dir, cwd=None, say=print, ready_timeout_s=90.0,
+                 cancelled=lambda: False):
         """
-        Start every entry; wait for the simulator's devices before the drivers.
+        Start every entry in turn, each once the one before runs.
+
+        So the simulator's devices are linked before a driver opens them.
 
         :param log_dir: each process's output goes to log_dir/<name>.log
         :param say: where progress lines go (a callable taking one line)
-        :raises RigError: the simulator died or linked no devices in ready_timeout_s (every
-            process started so far is stopped again)
+        :param cancelled: polled while waiting: True stops what has started and raises
+        :raises RigError: a process died, did not say it runs in ready_timeout_s, or the
+            start was cancelled (every process started so far is stopped again)
         """
         self.log_dir = pathlib.Path(log_dir)
         self.log_dir.mkdir(parents=True, exist_ok=True)
@@ -158,24 +147,25 @@ class Rig:
                                       str(self.log_dir / f'{entry.name}.log'), cwd)
                 self.processes.append((entry, process))
                 say(f'rig: started {entry.name} (pid {process.popen.pid})')
-                if entry.role == 'sim':
-                    self._wait_for_devices(entry, process, ready_timeout_s)
+                self._wait_running(entry, process, ready_timeout_s, cancelled)
         except BaseException:
             self.stop()
             raise
 
-    def _wait_for_devices(self, entry, process, timeout_s):
-        control = device_dir_of(entry) / CONTROL
+    @staticmethod
+    def _wait_running(entry, process, timeout_s, cancelled):
         deadline = time.monotonic() + timeout_s
         while True:
+            if f'{entry.name}: running' in process.output():
+                return
             if process.popen.poll() is not None:
                 raise RigError(f'{entry.name} exited ({process.popen.returncode}):\n'
                                + process.output()[-2000:])
-            if control.exists():
-                return
-            if time.monotonic() > deadline:  # checked once more above, at the deadline
-                raise RigError(f'{entry.name}: no devices in {control.parent} after '
-                               f'{timeout_s:g} s:\n' + process.output()[-2000:])
+            if cancelled():
+                raise RigError(f'cancelled while {entry.name} was starting')
+            if time.monotonic() > deadline:  # the output was read once more above
+                raise RigError(f'{entry.name} did not say it runs in {timeout_s:g} s:\n'
+                               + process.output()[-2000:])
             time.sleep(0.05)
 
     def process(self, name):

@@ -1,0 +1,124 @@
+"""
+scripts/rig: bring the whole rig up from one process table, and down safely.
+
+    scripts/rig --sim config/scenes/pancreatic_duct.yaml
+    scripts/rig --real config/lab            # coils.yaml, inserter.yaml, ... found there
+
+``--sim`` starts sim_node, coils_node, inserter_node (backbone_node where the scene has a
+backbone) and tracker_node (bringup.sim_table); ``--real`` starts the drivers whose params
+files a folder holds (bringup.real_table). Each node is its own process, its output in
+``--logs``. Ctrl-C (or SIGTERM) stops the drivers first, each confirming its safe state
+(supplies at zero and off, axes stopped), then the tracker, then the simulator; further
+Ctrl-C only say that the stop goes on. If a node dies on its own the rig is stopped the
+same way. DDS discovery stays on this machine (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST)
+unless the environment sets it: set ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET (and a
+ROS_DOMAIN_ID of the lab's) to let other machines see and command the rig.
+
+Exit status: 0 when every driver confirmed its safe stop; 1 when one did not, or a node
+died; 2 for a usage error or a rig that did not come up.
+"""
+
+import argparse
+import os
+import pathlib
+import signal
+import sys
+import threading
+import time
+
+USAGE_EXIT, UNSAFE_EXIT = 2, 1
+ROOT = pathlib.Path(__file__).resolve().parents[3]
+
+
+def build_parser():
+    """Return the command-line parser."""
+    parser = argparse.ArgumentParser(
+        prog='rig', description=__doc__.strip().split('\n')[0],
+        epilog='Ctrl-C stops the drivers first, then the simulator.')
+    mode = parser.add_mutually_exclusive_group(required=True)
+    mode.add_argument('--sim', metavar='SCENE', help='a scene file: run the simulated rig')
+    mode.add_argument('--real', metavar='CONFIG',
+                      help="a folder of the lab's params files: coils.yaml, inserter.yaml, "
+                      'backbone.yaml, camera.yaml, tracker.yaml (those present are run)')
+    parser.add_argument('--device-dir', help="--sim: sim_node's device folder (default "
+                        "config/sim/sim.yaml's, /tmp/tentacle_sim)")
+    parser.add_argument('--no-tracker', action='store_true', help='--sim: no tracker_node')
+    parser.add_argument('--sim-param', action='append', default=[], metavar='NAME:=VALUE',
+                        help='--sim: a sim_node parameter (repeatable), e.g. camera_rate:=15')
+    parser.add_argument('--logs', help="folder for the nodes' output (default "
+                        '/tmp/tentacle_rig/<date-time>)')
+    return parser
+
+
+def discovery_note(environ):
+    """Set LOCALHOST discovery unless the environment chose; return the line saying so."""
+    if 'ROS_AUTOMATIC_DISCOVERY_RANGE' not in environ:
+        environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+        how = ('this machine only (to open it: ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET '
+               'scripts/rig ...)')
+    else:
+        how = 'as the environment sets it'
+    return (f"rig: DDS discovery {environ['ROS_AUTOMATIC_DISCOVERY_RANGE']}, "
+            f"ROS_DOMAIN_ID {environ.get('ROS_DOMAIN_ID', '0')}: {how}")
+
+
+def table_of(opts, parser):
+    """Return the process table the options ask for (a usage error if they do not fit)."""
+    from tentacle_sim import bringup
+    if opts.real:
+        if opts.device_dir or opts.no_tracker or opts.sim_param:
+            parser.error('--device-dir, --no-tracker and --sim-param go with --sim')
+        return bringup.real_table(opts.real)
+    params = {}
+    for item in opts.sim_param:
+        name, sep, value = item.partition(':=')
+        if not sep or not name:
+            parser.error(f'--sim-param {item!r}: expected NAME:=VALUE')
+        params[name] = value
+    return bringup.sim_table(opts.sim, ROOT, opts.device_dir, not opts.no_tracker, **params)
+
+
+def main(args=None):
+    """Bring the rig up, wait for Ctrl-C or a death, bring it down; return the exit code."""
+    parser = build_parser()
+    opts = parser.parse_args(args)
+    from tentacle_planner.errors import PlanInputError
+    from tentacle_sim.bringup import Rig, RigError
+    try:
+        table = table_of(opts, parser)
+    except (FileNotFoundError, PlanInputError) as exc:
+        print(f'rig: {exc}', file=sys.stderr)
+        return USAGE_EXIT
+    print(discovery_note(os.environ), flush=True)
+    logs = pathlib.Path(opts.logs or f'/tmp/tentacle_rig/{time.strftime("%Y%m%d-%H%M%S")}')
+    stop = threading.Event()
+
+    def on_signal(signum, _frame):
+        if stop.is_set():
+            os.write(2, b'rig: already stopping: drivers first, then the simulator\n')
+        stop.set()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, on_signal)
+    say = lambda line: print(line, flush=True)  # noqa: E731
+    try:
+        rig = Rig(table, logs, ROOT, say, cancelled=stop.is_set)
+    except RigError as exc:
+        print(f'rig: did not come up: {exc}', file=sys.stderr)
+        return USAGE_EXIT
+    say(f'rig: up ({", ".join(e.name for e in table)}); logs in {logs}. '
+        'Ctrl-C stops the drivers first, then the simulator.')
+    died = []
+    while not stop.wait(0.2):
+        died = [name for name in [e.name for e in table] if name not in rig.alive()]
+        if died:
+            say(f'rig: {", ".join(died)} exited on its own (see {logs}): stopping the rig')
+            break
+    report = rig.stop()
+    unsafe = [name for name, _, _, safe in report if not safe]
+    if unsafe:
+        say(f'rig: NOT confirmed safe: {", ".join(unsafe)}: check those devices')
+    return UNSAFE_EXIT if unsafe or died else 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

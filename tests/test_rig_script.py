@@ -1,0 +1,122 @@
+"""
+scripts/rig as a lab runs it: up from the process table, down with Ctrl-C in order.
+
+The simulated rig (the validation cantilever), the real table on emulated devices, a second
+Ctrl-C during the stop, and a node that dies on its own.
+"""
+
+import os
+import signal
+import subprocess
+import threading
+
+import pytest
+from rig_support import ROOT, wait_for
+from tentacle_sim.emulator_client import EmulatorProcess, StageEmulatorProcess
+import yaml
+
+pytestmark = pytest.mark.ros
+
+
+class RigScript:
+    """scripts/rig in a process of its own, its output collected line by line."""
+
+    def __init__(self, *args):
+        self.popen = subprocess.Popen([str(ROOT / 'scripts' / 'rig'), *map(str, args)],
+                                      stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                      text=True, start_new_session=True)
+        self.lines = []
+        threading.Thread(target=lambda: self.lines.extend(self.popen.stdout),
+                         daemon=True).start()
+
+    def text(self):
+        return ''.join(self.lines)
+
+    def up(self):
+        return wait_for(lambda: 'rig: up' in self.text() or self.popen.poll() is not None,
+                        90.0) and 'rig: up' in self.text()
+
+    def pid(self, name):
+        line = next(x for x in self.lines if x.startswith(f'rig: started {name} '))
+        return int(line.split('pid ')[1].rstrip(')\n'))
+
+    def wait(self, timeout_s=120.0):
+        try:
+            return self.popen.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            os.killpg(self.popen.pid, signal.SIGKILL)
+            raise
+
+    def stopped_order(self):
+        return [x.split()[1] for x in self.lines if ' stopped (exit ' in x]
+
+
+def cantilever_scene(folder):
+    path = folder / 'scene.yaml'
+    path.write_text(yaml.safe_dump({
+        'tentacle': str(ROOT / 'config/tentacles/cantilever.yaml'),
+        'path': {'points_m': [[0.0, 0.0, 0.0], [0.02, 0.0, 0.0]]},
+        'insertion_steps_m': [0.02], 'model': {'dof': 1, 'sublinks': 8}}))
+    return path
+
+
+def test_sim_up_and_down_drivers_first_a_second_ctrl_c_waits(tmp_path):
+    rig = RigScript('--sim', cantilever_scene(tmp_path), '--device-dir', tmp_path / 'dev',
+                    '--logs', tmp_path / 'logs')
+    assert rig.up(), rig.text()
+    assert 'DDS discovery LOCALHOST' in rig.text()
+    os.killpg(rig.popen.pid, signal.SIGINT)
+    assert wait_for(lambda: 'rig: coils_node stopped' in rig.text()
+                    or 'rig: inserter_node stopped' in rig.text()
+                    or rig.popen.poll() is not None, 60.0)
+    os.killpg(rig.popen.pid, signal.SIGINT)   # the second Ctrl-C: the stop goes on
+    assert rig.wait() == 0, rig.text()
+    order = rig.stopped_order()
+    assert set(order[:2]) == {'coils_node', 'inserter_node'}, rig.text()
+    assert order[2:] == ['tracker_node', 'sim_node'], rig.text()
+    assert 'coils_node: outputs zero and off' in rig.text()
+    assert 'inserter_node: axis stopped' in rig.text()
+    assert not (tmp_path / 'dev' / 'coil_x').exists()   # the simulator went last, links too
+
+
+def test_a_node_that_dies_stops_the_rig_safely_and_says_so(tmp_path):
+    rig = RigScript('--sim', cantilever_scene(tmp_path), '--device-dir', tmp_path / 'dev',
+                    '--logs', tmp_path / 'logs', '--no-tracker')
+    assert rig.up(), rig.text()
+    os.kill(rig.pid('inserter_node'), signal.SIGKILL)
+    assert rig.wait() == 1, rig.text()
+    assert 'inserter_node exited on its own' in rig.text()
+    assert 'coils_node: outputs zero and off' in rig.text()
+    assert 'NOT confirmed safe: inserter_node' in rig.text()   # it could not say
+
+
+def test_real_table_on_a_labs_params_files(tmp_path):
+    supplies = EmulatorProcess(tmp_path / 'ports', 'scpi', 115200)
+    stages = StageEmulatorProcess(tmp_path / 'ports')
+    try:
+        config = tmp_path / 'lab'
+        config.mkdir()
+        coils = yaml.safe_load((ROOT / 'config/sim/coils.yaml').read_text())
+        coils['coils_node']['ros__parameters'].update(
+            ports=[supplies.ports[a] for a in 'xyz'], dialect='scpi', baud=115200)
+        (config / 'coils.yaml').write_text(yaml.safe_dump(coils))
+        inserter = yaml.safe_load((ROOT / 'config/sim/inserter.yaml').read_text())
+        inserter['inserter_node']['ros__parameters']['port'] = stages.ports['inserter']
+        (config / 'inserter.yaml').write_text(yaml.safe_dump(inserter))
+        rig = RigScript('--real', config, '--logs', tmp_path / 'logs')
+        assert rig.up(), rig.text()
+        assert wait_for(lambda: all(s['output_on'] for s in supplies.state().values()), 30.0)
+        os.killpg(rig.popen.pid, signal.SIGTERM)
+        assert rig.wait() == 0, rig.text()
+        # Read back from the devices, not taken from the driver's word.
+        assert all(not s['output_on'] and s['setpoint_a'] == 0.0
+                   for s in supplies.state().values())
+    finally:
+        supplies.stop()
+        stages.stop()
+
+
+def test_usage_errors_exit_2(tmp_path):
+    for args in (['--sim', tmp_path / 'absent.yaml'], ['--real', tmp_path],
+                 ['--real', tmp_path, '--no-tracker'], []):
+        assert RigScript(*args).wait(30.0) == 2

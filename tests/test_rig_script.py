@@ -13,6 +13,7 @@ import threading
 import pytest
 from rig_support import ROOT, wait_for
 from tentacle_sim.emulator_client import EmulatorProcess, StageEmulatorProcess
+from tentacle_sim.sim_devices import ask
 import yaml
 
 pytestmark = pytest.mark.ros
@@ -65,6 +66,14 @@ def test_sim_up_and_down_drivers_first_a_second_ctrl_c_waits(tmp_path):
                     '--logs', tmp_path / 'logs')
     assert rig.up(), rig.text()
     assert 'DDS discovery LOCALHOST' in rig.text()
+    # Driven from another terminal, as a lab user would: the devices say it happened.
+    assert command('home').returncode == 0
+    assert command('insert', '0.005').returncode == 0
+    assert wait_for(lambda: ask(tmp_path / 'dev', {'op': 'state'})['inserter'][
+        'position_m'] == pytest.approx(0.005, abs=1e-5), 10.0)
+    assert command('field', '0', '0.005', '0').returncode == 0
+    assert wait_for(lambda: ask(tmp_path / 'dev', {'op': 'state'})['coil_y'][
+        'current_a'] == pytest.approx(0.005 / 1.07e-3, abs=0.02), 10.0)
     os.killpg(rig.popen.pid, signal.SIGINT)
     assert wait_for(lambda: 'rig: coils_node stopped' in rig.text()
                     or 'rig: inserter_node stopped' in rig.text()
@@ -114,6 +123,18 @@ def test_real_table_on_a_labs_params_files(tmp_path):
     finally:
         supplies.stop()
         stages.stop()
+
+
+def command(*args):
+    return subprocess.run([str(ROOT / 'scripts' / 'rig-command'), '--wait-s', '5', *args],
+                          capture_output=True, text=True, timeout=120)
+
+
+def test_a_command_without_a_rig_says_so_and_a_bad_one_is_a_usage_error():
+    nobody = command('--wait-s', '0.5', 'estop', 'on')
+    assert nobody.returncode == 1 and 'is the rig up?' in nobody.stderr
+    assert command('field', '0', 'x', '0').returncode == 2
+    assert command('--axis', 'in-serter', 'home').returncode == 2
 
 
 def test_usage_errors_exit_2(tmp_path):

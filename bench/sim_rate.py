@@ -13,7 +13,7 @@ inserted, field steps alternate between two fields; the figures:
 - lag from a supply's current change to the /sim/shape that shows it: the supply's output
   polled over the control socket every 2 ms until it moves, to the receipt of the first
   shape whose tip moved more than 0.1 mm (target: at most two frame periods);
-- CPU share of each process, in cores, from /proc over the window.
+- CPU share of each node with its child processes, in cores, from /proc over the window.
 
 Run: .venv/bin/python bench/sim_rate.py [--scene FILE] [--steps N] [--window-s S]
 (writes bench/out/sim_rate.json)
@@ -42,6 +42,7 @@ import rclpy  # noqa: E402
 from std_msgs.msg import Float64  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 from tentacle_common import contract  # noqa: E402
+from tentacle_common.child_process import child_pids  # noqa: E402
 from tentacle_common.driver_node import client, publisher, subscription  # noqa: E402
 from tentacle_common.waiting import wait_for  # noqa: E402
 from tentacle_sim.bringup import Rig, sim_table  # noqa: E402
@@ -51,9 +52,10 @@ FIELDS_T = ([0.0, 0.010, 0.0], [0.008, -0.004, 0.0])
 
 
 def cpu_s(pid):
-    """Return a process's user + system CPU time, s (from /proc)."""
+    """Return the user + system CPU time of a process and the ones it started, s (/proc)."""
     fields = pathlib.Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+    own = (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+    return own + sum(cpu_s(child) for child in child_pids(pid))
 
 
 class Probe:
@@ -155,7 +157,8 @@ def main():
         probe.command(FIELDS_T[0])
         time.sleep(2.0)
         pids = {e.name: p.popen.pid for e, p in rig.processes}
-        emulator_note = 'the emulated devices run inside sim_node'
+        emulator_note = ('each node with the processes it started (the coil bank, the axis '
+                         'process and their spares); the emulated devices run inside sim_node')
         cpu0 = {n: cpu_s(pid) for n, pid in pids.items()}
         t0 = time.monotonic()
         lags = []

@@ -53,6 +53,23 @@ class SimProbe:
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.spinner = Spinner(self.executor)
+        # A held field is re-sent at 5 Hz, as a player does: coils_node's watchdog ramps to
+        # zero after 1 s without a command.
+        self._held, self._stop = None, threading.Event()
+        self._holder = threading.Thread(target=self._hold, daemon=True)
+        self._holder.start()
+
+    def _hold(self):
+        while not self._stop.wait(0.2):
+            held = self._held
+            if held is not None:
+                self.command_field(held)
+
+    def hold_field(self, field_t):
+        """Command a field (T) now and every 0.2 s from now on; None: stop commanding."""
+        self._held = None if field_t is None else [float(v) for v in field_t]
+        if field_t is not None:
+            self.command_field(field_t)
 
     def _keep(self, key, msg):
         with self.lock:
@@ -119,7 +136,9 @@ class SimProbe:
         return None
 
     def close(self):
-        """Stop spinning and shut the context down."""
+        """Stop commanding, stop spinning and shut the context down."""
+        self._stop.set()
+        self._holder.join(timeout=2.0)
         self.spinner.stop()
         self.node.destroy_node()
         rclpy.shutdown(context=self.context)

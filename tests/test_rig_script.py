@@ -9,6 +9,7 @@ import os
 import signal
 import subprocess
 import threading
+import time
 
 import pytest
 from rig_support import ROOT, wait_for
@@ -71,9 +72,15 @@ def test_sim_up_and_down_drivers_first_a_second_ctrl_c_waits(tmp_path):
     assert command('insert', '0.005').returncode == 0
     assert wait_for(lambda: ask(tmp_path / 'dev', {'op': 'state'})['inserter'][
         'position_m'] == pytest.approx(0.005, abs=1e-5), 10.0)
-    assert command('field', '0', '0.005', '0').returncode == 0
+    holding = subprocess.Popen([str(ROOT / 'scripts' / 'rig-command'), 'field', '0', '0.005',
+                                '0'], stdout=subprocess.PIPE, text=True)
     assert wait_for(lambda: ask(tmp_path / 'dev', {'op': 'state'})['coil_y'][
-        'current_a'] == pytest.approx(0.005 / 1.07e-3, abs=0.02), 10.0)
+        'current_a'] == pytest.approx(0.005 / 1.07e-3, abs=0.02), 20.0)
+    time.sleep(1.5)   # past coils_node's 1 s watchdog: still held
+    assert ask(tmp_path / 'dev', {'op': 'state'})['coil_y']['current_a'] == pytest.approx(
+        0.005 / 1.07e-3, abs=0.02)
+    holding.send_signal(signal.SIGINT)
+    assert holding.wait(20) == 0 and 'stopped holding' in holding.stdout.read()
     os.killpg(rig.popen.pid, signal.SIGINT)
     assert wait_for(lambda: 'rig: coils_node stopped' in rig.text()
                     or 'rig: inserter_node stopped' in rig.text()

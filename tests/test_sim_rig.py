@@ -89,7 +89,7 @@ def supply(devices, axis):
 
 def test_a_held_field_bends_the_body_as_the_elastica_says(rig):
     probe, devices, _ = rig
-    probe.command_field([0.0, FIELD_T, 0.0])
+    probe.hold_field([0.0, FIELD_T, 0.0])
     # The supply's output settles (slew, then the coil's L/R), then the body with it.
     assert wait_for(lambda: abs(supply(devices, 'y')['current_a'] - Y_AMPS) < 0.01, 10.0)
     since = time.monotonic() + 0.2
@@ -135,7 +135,7 @@ def test_a_field_step_shows_in_the_shape_within_a_second(rig):
     probe, _, _ = rig
     before = settled(probe, time.monotonic())[-1]
     commanded = time.time()
-    probe.command_field([0.0, FIELD_T / 2, 0.0])
+    probe.hold_field([0.0, FIELD_T / 2, 0.0])
     since = time.monotonic()
     assert wait_for(lambda: any(np.linalg.norm(points_of(m)[-1] - before) > 1e-4
                                 for m in probe.every('shape', since)), 10.0)
@@ -146,7 +146,7 @@ def test_a_field_step_shows_in_the_shape_within_a_second(rig):
 
 def test_a_stalled_stage_stops_the_insertion_where_it_stalled(rig):
     probe, devices, _ = rig
-    probe.command_field([0.0, 0.0, 0.0])
+    probe.hold_field([0.0, 0.0, 0.0])
     probe.target(0.005)
     settled(probe, time.monotonic(), lambda p: arc_length_m(p) == pytest.approx(0.005, abs=1e-5))
     ask(devices, {'op': 'fault', 'port': 'inserter', 'kind': 'stall', 'after_m': 0.006})
@@ -165,9 +165,10 @@ def test_a_stalled_stage_stops_the_insertion_where_it_stalled(rig):
 
 def test_estop_brings_the_supplies_to_zero_and_the_body_relaxes_straight(rig):
     probe, devices, _ = rig
-    probe.command_field([0.0, FIELD_T, 0.0])
+    probe.hold_field([0.0, FIELD_T, 0.0])
     settled(probe, time.monotonic(), lambda p: p[-1, 1] > 0.01)
     probe.estop(True)
+    probe.hold_field(None)   # what a player does on an estop: commands stop
     try:
         # The currents read from the supplies themselves: the physics saw the real ones.
         assert wait_for(lambda: all(abs(s['current_a']) < 1e-3 and not s['output_on']
@@ -183,7 +184,7 @@ def test_estop_brings_the_supplies_to_zero_and_the_body_relaxes_straight(rig):
 
 def test_a_supply_whose_line_is_lost_keeps_its_current_and_the_body_stays_bent(rig):
     probe, devices, _ = rig
-    probe.command_field([0.0, FIELD_T, 0.0])
+    probe.hold_field([0.0, FIELD_T, 0.0])
     assert wait_for(lambda: abs(supply(devices, 'y')['current_a'] - Y_AMPS) < 0.01, 10.0)
     ask(devices, {'op': 'fault', 'port': 'coil_y', 'kind': 'disconnect', 'duration_s': 6.0})
     since = time.monotonic()
@@ -194,6 +195,7 @@ def test_a_supply_whose_line_is_lost_keeps_its_current_and_the_body_stays_bent(r
     assert supply(devices, 'y')['current_a'] == pytest.approx(Y_AMPS, abs=0.01)
     points = settled(probe, time.monotonic())
     assert np.linalg.norm(points[-1, :2] - TIP_M) < 0.02 * LENGTH_M
+    probe.hold_field(None)
     # Reconnected, the driver finds it holding current and drives it to zero.
     assert wait_for(lambda: abs(supply(devices, 'y')['current_a']) < 1e-3, 20.0)
     settled(probe, time.monotonic(), lambda p: abs(p[-1, 1]) < 1e-6)

@@ -1,7 +1,8 @@
 """
 scripts/rig-command: one command to a running rig (simulated or real), from a terminal.
 
-    scripts/rig-command field 0 0.010 0      # /coils/field_cmd, tesla, frame coils
+    scripts/rig-command field 0 0.010 0      # /coils/field_cmd, tesla, frame coils: held
+                                             # (re-sent at 5 Hz) until Ctrl-C
     scripts/rig-command home                 # /inserter/home ("zero is here")
     scripts/rig-command insert 0.030         # /inserter/target, metre
     scripts/rig-command estop on|off         # /estop (latched)
@@ -10,9 +11,11 @@ scripts/rig-command: one command to a running rig (simulated or real), from a te
 
 Where a lab PC has ROS 2, ``ros2 topic pub`` and ``ros2 service call`` do the same; this is
 for the machines without the ros2 command line. Each command waits (with a deadline) until
-the rig has a subscriber or server for it, and says what it did; ``--axis backbone`` sends
-home and insert to the backbone stage. Exit 0 done, 1 the rig refused or did not answer,
-2 a usage error.
+the rig has a subscriber or server for it, and says what it did. coils_node ramps the field
+to zero when no command came for ``watchdog_s`` (1 s): ``field`` therefore holds the field
+by sending it again at 5 Hz until Ctrl-C (``--once``: one command, gone after watchdog_s).
+``--axis backbone`` sends home and insert to the backbone stage. Exit 0 done, 1 the rig
+refused or did not answer, 2 a usage error.
 """
 
 import argparse
@@ -42,6 +45,8 @@ def build_parser():
     field = sub.add_parser('field', help='command a field, tesla (frame coils)')
     for name in 'xyz':
         field.add_argument(f'b{name}', type=float, metavar=f'B{name.upper()}')
+    field.add_argument('--once', action='store_true',
+                       help="one command (coils_node's watchdog ramps it down after 1 s)")
     sub.add_parser('home', help='make where the stage stands its zero')
     insert = sub.add_parser('insert', help='move the stage to a position, metre')
     insert.add_argument('position_m', type=float)
@@ -53,10 +58,18 @@ def build_parser():
     return parser
 
 
-def _published(node, topic, msg, wait_s):
+def _publisher_seen(node, topic, wait_s):
+    """Return (publisher, None) once the rig subscribes to topic; (None, why) if it does not."""
     pub = publisher(node, topic)
     if not wait_for(lambda: pub.get_subscription_count() > 0, wait_s):
-        return f'no subscriber to {topic.name} in {wait_s:g} s: is the rig up?'
+        return None, f'no subscriber to {topic.name} in {wait_s:g} s: is the rig up?'
+    return pub, None
+
+
+def _published(node, topic, msg, wait_s):
+    pub, problem = _publisher_seen(node, topic, wait_s)
+    if problem:
+        return problem
     pub.publish(msg)
     time.sleep(0.2)   # let a reliable publication go out before the node goes away
     return None
@@ -83,9 +96,23 @@ def run(node, opts):
         msg.header.stamp = node.get_clock().now().to_msg()
         msg.header.frame_id = contract.COILS_FRAME
         msg.vector.x, msg.vector.y, msg.vector.z = b
-        problem = _published(node, contract.FIELD_CMD, msg, opts.wait_s)
-        return problem is None, problem or (f'field commanded: {[v * 1e3 for v in b]} mT '
-                                            '(coils_node logs a refusal)')
+        pub, problem = _publisher_seen(node, contract.FIELD_CMD, opts.wait_s)
+        if problem:
+            return False, problem
+        pub.publish(msg)
+        what = f'field [{", ".join(f"{v * 1e3:g}" for v in b)}] mT'
+        if opts.once:
+            time.sleep(0.2)
+            return True, f'{what} commanded once (coils_node logs a refusal)'
+        print(f'rig-command: holding {what} (re-sent at 5 Hz); Ctrl-C to stop', flush=True)
+        try:
+            while True:
+                time.sleep(0.2)
+                msg.header.stamp = node.get_clock().now().to_msg()
+                pub.publish(msg)
+        except KeyboardInterrupt:
+            return True, f'stopped holding {what}: it ramps to zero within watchdog_s'
+
     if opts.command == 'insert':
         problem = _published(node, contract.axis_target(opts.axis),
                              Float64(data=opts.position_m), opts.wait_s)

@@ -60,6 +60,8 @@ class Segment:
     density_kg_m3: float
     magnetisation_a_per_m: np.ndarray  # (3,) M = Br / mu0 along the direction, link frame
     radius_m: float = 0.0        # the section's farthest edge from the axis (clearances), m
+    width_m: float = 0.0         # its extent along link y, in the base plane (what a camera
+                                 # looking down the plane's normal sees), m
 
     @property
     def bend_stiffness_n_m2(self):
@@ -105,7 +107,7 @@ def _segment(read, raw, where):
         d = read.number(section['diameter_m'], f'{where}.section.diameter_m')
         area, i_y, i_z, polar = math.pi * d * d / 4, math.pi * d ** 4 / 64, \
             math.pi * d ** 4 / 64, math.pi * d ** 4 / 32
-        radius = d / 2
+        radius, width = d / 2, d
     else:
         section = read.mapping(section, f'{where}.section', {'width_m', 'height_m'},
                                ('width_m', 'height_m'))
@@ -113,7 +115,7 @@ def _segment(read, raw, where):
         h = read.number(section['height_m'], f'{where}.section.height_m')
         area, i_y, i_z = w * h, w * h ** 3 / 12, h * w ** 3 / 12
         polar = i_y + i_z
-        radius = math.hypot(w, h) / 2
+        radius, width = math.hypot(w, h) / 2, w
     modulus = raw['youngs_modulus_pa']
     if isinstance(modulus, dict):
         modulus = read.mapping(modulus, f'{where}.youngs_modulus_pa',
@@ -132,7 +134,8 @@ def _segment(read, raw, where):
                          allow_zero=True)
         magnetisation = br / MU0 * read.vector(mag['direction'],
                                                f'{where}.magnetisation.direction', unit=True)
-    return Segment(length, area, (i_y, i_z), polar, moduli, density, magnetisation, radius)
+    return Segment(length, area, (i_y, i_z), polar, moduli, density, magnetisation, radius,
+                   width)
 
 
 def parse_tentacle(document, source='<tentacle>'):

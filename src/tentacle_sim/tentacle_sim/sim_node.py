@@ -79,7 +79,7 @@ class SimNode(Node):
                            time_budget_s=p['physics_budget'] * self.period_s)
         self.camera = SimCamera(self.scene, p['metres_per_px'], p['base_px'], p['image_size'],
                                 p['noise'])
-        self.width_m = 2 * self.world.link_radius_m()
+        self.width_m = self.world.body_width_m()
         try:
             self.devices = SimDevices(
                 p['device_dir'], p['coil_dialect'], self.world.has_backbone,

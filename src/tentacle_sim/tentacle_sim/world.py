@@ -108,17 +108,25 @@ class World:
         crossing = int(np.count_nonzero(least < 0))
         return crossing, float(-least.min()) if crossing else 0.0
 
-    def link_radius_m(self):
-        """Return the body's largest section radius, m (what the camera sees as its width)."""
-        return max(s.radius_m for s in self.spec.segments)
+    def body_width_m(self):
+        """Return the body's widest section in the base plane, m (what the camera sees)."""
+        return max(s.width_m for s in self.spec.segments)
 
     def magnet_ranges_m(self, inserted_m):
-        """Return the magnetised segments' (start, end) arc lengths past the insertion point."""
+        """
+        Return the magnetised stretches' (start, end) arc lengths past the insertion point.
+
+        Neighbouring magnetised segments make one stretch (the renderer draws each in turn).
+        """
         base = self.spec.length_m - inserted_m  # material coordinate at the insertion point
         ranges, start = [], 0.0
         for segment in self.spec.segments:
             end = start + segment.length_m
             if np.any(segment.magnetisation_a_per_m) and end > base:
-                ranges.append((max(start - base, 0.0), end - base))
+                first = max(start - base, 0.0)
+                if ranges and abs(ranges[-1][1] - first) < 1e-12:
+                    ranges[-1] = (ranges[-1][0], end - base)
+                else:
+                    ranges.append((first, end - base))
             start = end
         return ranges

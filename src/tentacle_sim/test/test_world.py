@@ -1,10 +1,12 @@
 """The simulated rig's physics against independent references: the elastica, geometry."""
 
 import math
+import pathlib
 
 import numpy as np
 import pytest
 from tentacle_model.elastica import cantilever_tip
+from tentacle_planner.scene import load_scene
 from tentacle_sim.world import World
 
 FIELD_T = 5e-3
@@ -87,3 +89,12 @@ def test_contact_with_an_obstacle_is_counted_with_its_depth(cantilever):
     clear = World(cantilever.scene(obstacles=[{'centre_m': [0.010, 0.005, 0.0],
                                                'radius_m': radius}]), ACTUATION)
     assert clear.step([0, 0, 0], c.LENGTH_M).contacts == 0
+
+
+def test_the_camera_sees_the_in_plane_width_and_one_stretch_of_magnets():
+    root = pathlib.Path(__file__).resolve().parents[3] / 'config' / 'scenes'
+    duct = World(load_scene(root / 'pancreatic_duct.yaml'), ACTUATION)
+    assert duct.body_width_m() == pytest.approx(0.002)               # a 2 mm rod
+    assert duct.magnet_ranges_m(0.03) == [pytest.approx((0.0, 0.03))]   # five segments, one
+    ribbon = World(load_scene(root / 'ch6_coiling.yaml'), ACTUATION)
+    assert ribbon.body_width_m() == pytest.approx(0.002)   # 2 mm wide in the plane, 10 tall

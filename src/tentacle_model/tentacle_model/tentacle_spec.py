@@ -60,8 +60,7 @@ class Segment:
     density_kg_m3: float
     magnetisation_a_per_m: np.ndarray  # (3,) M = Br / mu0 along the direction, link frame
     radius_m: float = 0.0        # the section's farthest edge from the axis (clearances), m
-    width_m: float = 0.0         # its extent along link y, in the base plane (what a camera
-                                 # looking down the plane's normal sees), m
+    width_m: float = 0.0         # its extent along link y, in the base plane (a camera), m
 
     @property
     def bend_stiffness_n_m2(self):

@@ -117,8 +117,10 @@ class Probe:
 
 def step_lag(probe, devices, field_t, before_a):
     """
-    Command a field; return the lags (s) from the supplies' change to the receipt of (the
-    first shape sampled after it, the first whose tip moved 0.1 mm), or None.
+    Command a field; return two lags (s) from the supplies' change, or None.
+
+    To the receipt of the first shape sampled after the change, and of the first whose tip
+    moved 0.1 mm.
     """
     tip_before = probe.last_tip()
     probe.command(field_t)

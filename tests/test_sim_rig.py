@@ -200,3 +200,22 @@ def test_a_supply_whose_line_is_lost_keeps_its_current_and_the_body_stays_bent(r
     assert wait_for(lambda: abs(supply(devices, 'y')['current_a']) < 1e-3, 20.0)
     settled(probe, time.monotonic(), lambda p: abs(p[-1, 1]) < 1e-6)
     assert wait_for(lambda: probe.enable_coils(True), 10.0)
+
+
+def test_markers_show_the_body_the_field_the_path_and_the_phantom(rig):
+    probe, _, _ = rig
+    probe.hold_field([0.0, FIELD_T, 0.0])
+    settled(probe, time.monotonic(), lambda p: p[-1, 1] > 0.01)
+    since = time.monotonic()
+    assert wait_for(lambda: probe.latest('markers', since) is not None, 10.0)
+    markers = {m.ns: m for m in probe.latest('markers', since).markers}
+    assert set(markers) == {'path', 'obstacles', 'body', 'field'}
+    assert all(m.header.frame_id == 'coils' for m in markers.values())
+    body = np.array([[p.x, p.y, p.z] for p in markers['body'].points])
+    assert len(body) == 33 and np.linalg.norm(body[-1, :2] - TIP_M) < 0.02 * LENGTH_M
+    start, end = (np.array([p.x, p.y, p.z]) for p in markers['field'].points)
+    assert end - start == pytest.approx(np.array([0.0, FIELD_T, 0.0]), abs=2e-5)   # 1 m/T
+    ball = markers['obstacles']
+    assert [ball.pose.position.x, ball.pose.position.y] == pytest.approx(BALL_CENTRE_M[:2])
+    assert ball.scale.x == pytest.approx(2 * BALL_RADIUS_M)
+    probe.hold_field([0.0, 0.0, 0.0])

@@ -14,17 +14,20 @@ ROOT = pathlib.Path(__file__).resolve().parents[3]
 DUCT = ROOT / 'config' / 'scenes' / 'pancreatic_duct.yaml'
 
 
-def scene_with(tmp_path, mismatch):
+def scene_with(tmp_path, mismatch=None):
+    """Return the duct scene with another mismatch block (None: without one)."""
     document = yaml.safe_load(DUCT.read_text())
     document['tentacle'] = str(DUCT.parent / document['tentacle'])
-    document['mismatch'] = mismatch
+    document.pop('mismatch', None)
+    if mismatch is not None:
+        document['mismatch'] = mismatch
     path = tmp_path / 'scene.yaml'
     path.write_text(yaml.safe_dump(document))
     return load_scene(path)
 
 
-def test_no_block_is_no_mismatch():
-    scene = load_scene(DUCT)
+def test_no_block_is_no_mismatch(tmp_path):
+    scene = scene_with(tmp_path)
     assert scene.mismatch == Mismatch() and scene.mismatch.describe() == 'none'
     spec = scene.mismatch.tentacle(scene.tentacle)
     for a, b in zip(scene.tentacle.segments, spec.segments):
@@ -62,3 +65,11 @@ def test_the_block_changes_the_tentacle_and_the_coils_as_it_says(tmp_path):
 def test_a_bad_block_is_refused_naming_the_key(tmp_path, block, message):
     with pytest.raises(PlanInputError, match=message):
         scene_with(tmp_path, block)
+
+
+def test_the_duct_scenes_state_a_realistic_mismatch():
+    for name in ('pancreatic_duct', 'bile_duct'):
+        mismatch = load_scene(DUCT.parent / f'{name}.yaml').mismatch
+        assert mismatch.describe() == ('stiffness x0.9, remanence x0.95, insertion point moved '
+                                       'by [0, 0.3, 0] mm, insertion turned 1.5 deg, coils '
+                                       'x[1.03, 0.97, 1]')

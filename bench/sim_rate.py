@@ -79,6 +79,7 @@ class Probe:
                         for axis in contract.AXES}
         self.homes = {axis: client(self.node, contract.axis_service(axis, 'home'))
                       for axis in contract.AXES}
+        self.background = client(self.node, contract.VISION_CAPTURE_BACKGROUND)
         threading.Thread(target=rclpy.spin, args=(self.node,), daemon=True).start()
 
     def _count(self, key):
@@ -166,6 +167,9 @@ def main():
         moves = {'inserter': opts.inserted_m}
         if scene.backbone_steps_m:
             moves['backbone'] = scene.backbone_steps_m[0]
+        assert probe.background.wait_for_service(timeout_sec=30.0)
+        assert wait_for(lambda: (f := probe.background.call_async(Trigger.Request()))
+                        and wait_for(f.done, 5.0) and f.result().success, 30.0)
         for axis, position in moves.items():
             assert probe.homes[axis].wait_for_service(timeout_sec=30.0)
             future = probe.homes[axis].call_async(Trigger.Request())

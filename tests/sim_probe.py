@@ -50,6 +50,7 @@ class SimProbe:
         self.target_pub = publisher(self.node, contract.axis_target('inserter'))
         self.home_client = client(self.node, contract.axis_service('inserter', 'home'))
         self.enable_client = client(self.node, contract.COILS_ENABLE)
+        self.background_client = client(self.node, contract.VISION_CAPTURE_BACKGROUND)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.spinner = Spinner(self.executor)
@@ -109,8 +110,9 @@ class SimProbe:
         self.target_pub.publish(Float64(data=float(position_m)))
 
     def call(self, which, request, timeout_s=20.0):
-        """Call a service ('home' or 'enable'); return the response, None on timeout."""
-        handle = self.home_client if which == 'home' else self.enable_client
+        """Call 'home', 'enable' or 'background'; return the response, None on timeout."""
+        handle = {'home': self.home_client, 'enable': self.enable_client,
+                  'background': self.background_client}[which]
         if not handle.wait_for_service(timeout_sec=timeout_s):
             return None
         future = handle.call_async(request)
@@ -120,6 +122,11 @@ class SimProbe:
     def home(self):
         """Home the inserter; return whether it said so."""
         response = self.call('home', Trigger.Request())
+        return response is not None and response.success
+
+    def capture_background(self):
+        """Have the tracker take its next frame as the empty scene; return whether it did."""
+        response = self.call('background', Trigger.Request())
         return response is not None and response.success
 
     def enable_coils(self, on=True):

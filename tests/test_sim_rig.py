@@ -54,6 +54,8 @@ def rig(tmp_path_factory):
     probe = SimProbe()
     try:
         assert probe.home(), rig.process('inserter_node').output()
+        # Nothing inserted: the tracker sees the empty scene (the sheath, the phantom).
+        assert wait_for(probe.capture_background, 20.0), rig.process('tracker_node').output()
         probe.target(LENGTH_M)
         assert wait_for(lambda: (s := probe.shape()) is not None
                         and arc_length_m(s) == pytest.approx(LENGTH_M, abs=1e-5), 30.0), (

@@ -64,6 +64,7 @@ CAMERA_INFO = Topic('/camera/camera_info', 'sensor_msgs/msg/CameraInfo', frame_i
 VISION_TIP = Topic('/vision/tip', 'geometry_msgs/msg/PoseStamped', frame_id=WORKSPACE_FRAME)
 VISION_SHAPE = Topic('/vision/shape', 'nav_msgs/msg/Path', frame_id=WORKSPACE_FRAME)
 VISION_LOOP = Topic('/vision/loop', 'sensor_msgs/msg/JointState', frame_id=WORKSPACE_FRAME)
+VISION_CAPTURE_BACKGROUND = Service('/vision/capture_background', 'std_srvs/srv/Trigger')
 VISION_DEBUG = Topic('/vision/debug_image', 'sensor_msgs/msg/Image', DEBUG, WORKSPACE_FRAME)
 
 SIM_SHAPE = Topic('/sim/shape', 'nav_msgs/msg/Path', frame_id=COILS_FRAME)

@@ -70,7 +70,8 @@ def sim_table(scene_file, root, device_dir=None, tracker=True, **sim_params):
         ports = {'coils': {'ports': '[' + ','.join(f'{device_dir}/coil_{a}' for a in 'xyz')
                            + ']'},
                  'inserter': {'port': f'{device_dir}/inserter'},
-                 'backbone': {'port': f'{device_dir}/backbone'}}
+                 'backbone': {'port': f'{device_dir}/backbone'},
+                 'tracker': {'background_image': f'{device_dir}/background.png'}}
     table = [Entry('sim_node', 'tentacle_sim.sim_node',
                    _ros_args(sim_dir / 'sim.yaml', scene=scene_file, **sim_params), 'sim'),
              Entry('coils_node', 'tentacle_coils.coils_node',
@@ -83,7 +84,8 @@ def sim_table(scene_file, root, device_dir=None, tracker=True, **sim_params):
                                      **ports.get('backbone', {}))))
     if tracker:
         table.append(Entry('tracker_node', 'tentacle_vision.tracker_node',
-                           _ros_args(sim_dir / 'tracker.yaml', **_camera_of(sim_params)),
+                           _ros_args(sim_dir / 'tracker.yaml', **_camera_of(sim_params),
+                                     **ports.get('tracker', {})),
                            'watcher'))
     return table
 

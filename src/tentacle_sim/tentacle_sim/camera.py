@@ -15,12 +15,16 @@ from tentacle_vision.pixels import ScaleMap
 from tentacle_vision.render import Renderer
 
 CHANNEL_WIDTH_M = 0.004  # the phantom's channel along the path, drawn behind the body
+SHEATH_WIDTH_M, SHEATH_LENGTH_M = 0.004, 0.06   # the inserter's sheath, up to the insertion
+FLUID = 0.15             # the fluid in the channel darkens it this much, mottled
+GLARE_RADIUS_M = 6e-4    # specular spots on the channel's walls
 
 
 class SimCamera:
     """Frames of one scene."""
 
-    def __init__(self, scene, metres_per_px, base_px, size=(2048, 1536), noise=True):
+    def __init__(self, scene, metres_per_px, base_px, size=(2048, 1536), noise=True,
+                 artefacts=True):
         """
         Draw the phantom.
 
@@ -29,14 +33,36 @@ class SimCamera:
         :param base_px: (u, v) where the nominal insertion point images, px
         :param size: (width, height), px
         :param noise: sensor noise in every frame
+        :param artefacts: draw what a real camera sees besides the body: the inserter's dark
+            sheath up to the insertion point (it touches the body's base), fluid in the
+            channel, glare on its walls
         """
         self.origin_m = scene.tentacle.base_position_m
         self.size = tuple(int(v) for v in size)
+        path = self.workspace(scene.path.points_m)
+        extras = {}
+        if artefacts:
+            inward = scene.tentacle.base_rotation[:2, 0]
+            inward = inward / max(np.linalg.norm(inward), 1e-12)
+            extras = {'fluid': FLUID, 'sheath_m': np.array([-SHEATH_LENGTH_M * inward,
+                                                            [0.0, 0.0]]),
+                      'sheath_width_m': SHEATH_WIDTH_M, 'glare_m': self._glare(path)}
         self.renderer = Renderer(
             ScaleMap(metres_per_px, base_px), self.size, noise_sigma=3.0 if noise else 0.0,
-            phantom_m=self.workspace(scene.path.points_m), phantom_width_m=CHANNEL_WIDTH_M,
+            phantom_m=path, phantom_width_m=CHANNEL_WIDTH_M,
             obstacles_m=[(self.workspace(s.centre_m)[0], s.radius_m) for s in scene.obstacles],
-            walls_m=[self.workspace(w.points_m) for w in scene.walls])
+            walls_m=[self.workspace(w.points_m) for w in scene.walls], **extras)
+
+    @staticmethod
+    def _glare(path):
+        """Return glare spots on the channel's walls, a third and two thirds along the path."""
+        spots = []
+        for k, side in ((len(path) // 3, 1.0), (2 * len(path) // 3, -1.0)):
+            if 0 < k < len(path) - 1:
+                d = path[k + 1] - path[k - 1]
+                normal = np.array([-d[1], d[0]]) / max(np.linalg.norm(d), 1e-12)
+                spots.append((path[k] + side * 0.5 * CHANNEL_WIDTH_M * normal, GLARE_RADIUS_M))
+        return spots
 
     def workspace(self, points_m):
         """Return (N, 2) workspace points, m, of (N, 3) coils points."""

@@ -7,6 +7,7 @@ scripts/rig-command: one command to a running rig (simulated or real), from a te
     scripts/rig-command insert 0.030         # /inserter/target, metre
     scripts/rig-command estop on|off         # /estop (latched)
     scripts/rig-command enable on|off        # /coils/enable
+    scripts/rig-command background           # /vision/capture_background: the empty scene
     scripts/rig-command watch                # /sim/shape's tip, /vision/tip, /sim/contact
 
 Where a lab PC has ROS 2, ``ros2 topic pub`` and ``ros2 service call`` do the same; this is
@@ -48,6 +49,8 @@ def build_parser():
     field.add_argument('--once', action='store_true',
                        help="one command (coils_node's watchdog ramps it down after 1 s)")
     sub.add_parser('home', help='make where the stage stands its zero')
+    sub.add_parser('background', help="the tracker's next frame is the empty scene (call it "
+                   'with nothing inserted)')
     insert = sub.add_parser('insert', help='move the stage to a position, metre')
     insert.add_argument('position_m', type=float)
     for name in ('estop', 'enable'):
@@ -124,6 +127,9 @@ def run(node, opts):
         return problem is None, problem or f'estop {opts.state}'
     if opts.command == 'home':
         return _called(node, contract.axis_service(opts.axis, 'home'), Trigger.Request(),
+                       opts.wait_s)
+    if opts.command == 'background':
+        return _called(node, contract.VISION_CAPTURE_BACKGROUND, Trigger.Request(),
                        opts.wait_s)
     if opts.command == 'enable':
         return _called(node, contract.COILS_ENABLE, SetBool.Request(data=opts.state == 'on'),

@@ -31,6 +31,9 @@ SIM_PARAMS = (
           'goes on at the next frame', 0.05, 1.0),
     Param('markers_rate', 5.0, '/sim/markers, hertz (0: off)', 0.0, 60.0),
     Param('noise', True, 'sensor noise in the frames'),
+    Param('artefacts', True, "what a real camera sees besides the body: the inserter's dark "
+          'sheath up to the insertion point, fluid in the channel, glare (tracker_node then '
+          'needs a background_image: /vision/capture_background before inserting)'),
     Param('coil_resistance_ohm', 1.0, 'each emulated coil: resistance, ohm', 1e-3, 1e3),
     Param('coil_inductance_h', 0.01, 'each emulated coil: inductance, henry (L/R is the lag '
           "of the current behind the supply's setpoint)", 0.0, 10.0),

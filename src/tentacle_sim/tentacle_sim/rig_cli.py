@@ -84,12 +84,16 @@ def main(args=None):
     opts = parser.parse_args(args)
     from tentacle_planner.errors import PlanInputError
     from tentacle_sim.bringup import Rig, RigError
+    from tentacle_sim.params import DEFAULT_DEVICE_DIR
     try:
         table = table_of(opts, parser)
     except (FileNotFoundError, PlanInputError) as exc:
         print(f'rig: {exc}', file=sys.stderr)
         return USAGE_EXIT
     print(discovery_note(os.environ), flush=True)
+    if opts.sim:   # a background of another scene would be taken for this one's
+        stale = pathlib.Path(opts.device_dir or DEFAULT_DEVICE_DIR) / 'background.png'
+        stale.unlink(missing_ok=True)
     logs = pathlib.Path(opts.logs or f'/tmp/tentacle_rig/{time.strftime("%Y%m%d-%H%M%S")}')
     stop = threading.Event()
 
@@ -107,6 +111,9 @@ def main(args=None):
         return USAGE_EXIT
     say(f'rig: up ({", ".join(e.name for e in table)}); logs in {logs}. '
         'Ctrl-C stops the drivers first, then the simulator.')
+    if opts.sim and not opts.no_tracker:
+        say('rig: before inserting, let the tracker see the empty scene: '
+            'scripts/rig-command background')
     died = []
     while not stop.wait(0.2):
         died = [name for name in [e.name for e in table] if name not in rig.alive()]

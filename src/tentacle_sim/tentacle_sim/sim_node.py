@@ -78,7 +78,7 @@ class SimNode(Node):
                            insertion_offset_m=p['insertion_offset_m'],
                            time_budget_s=p['physics_budget'] * self.period_s)
         self.camera = SimCamera(self.scene, p['metres_per_px'], p['base_px'], p['image_size'],
-                                p['noise'])
+                                p['noise'], p['artefacts'])
         self.width_m = self.world.body_width_m()
         try:
             self.devices = SimDevices(

@@ -54,3 +54,17 @@ def to_message(image, encoding):
         raise ValueError(f'{encoding} needs {CHANNELS[encoding]} channels, got {channels}')
     image = np.ascontiguousarray(image, np.uint8)
     return image.shape[0], image.shape[1], image.shape[1] * channels, image.tobytes()
+
+
+def read_background(path):
+    """
+    Return a background frame from an image file: mono8 or bgr8 (alpha dropped).
+
+    :raises ValueError: the file is missing or not an image OpenCV reads
+    """
+    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if image is None:
+        raise ValueError(f'background_image {path}: missing or not an image')
+    if image.ndim == 3 and image.shape[2] == 4:
+        image = image[:, :, :3]
+    return image.astype(np.uint8)

@@ -18,6 +18,9 @@ TRACKER_PARAMS = (
           1e-7, 1.0),
     Param('homography', [0.0] * 9, 'pixels to workspace metres, 3 x 3 row-major (all zero: '
           'use metres_per_px with the origin at base_px); scripts/calibrate_camera fits it'),
+    Param('background_image', '', 'a frame of the scene without the tentacle (taken before '
+          'insertion; /vision/capture_background writes it): the body is what differs from '
+          'it, in any colour; empty: none, the segmentation settings apply'),
     Param('image_topic', contract.IMAGE.name, 'frames: mono8, bgr8, rgb8 or bayer_rggb8'),
     Param('image_reliability', 'reliable', 'QoS of the frames: reliable or best_effort (to '
           'match a best-effort camera driver)'),

@@ -154,7 +154,8 @@ class Renderer:
     def __init__(self, pixel_map, size=(2048, 1536), *, background=200.0, body=60.0,
                  magnet=25.0, lighting=0.25, noise_sigma=3.0, blur_px=0.8,
                  phantom_m=None, phantom_width_m=0.006, obstacles_m=(), walls_m=(),
-                 wall_width_m=3e-4, seed=0):
+                 wall_width_m=3e-4, fluid=0.0, sheath_m=None, sheath_width_m=0.003,
+                 sheath=35.0, glare_m=(), seed=0):
         """
         Set up the constant parts.
 
@@ -169,6 +170,10 @@ class Renderer:
             darker walls behind the body; None: no phantom
         :param obstacles_m: ((centre (2,), radius), ...) discs, m, drawn as darker phantom
         :param walls_m: ((k, 2) polylines, ...), m, drawn wall_width_m wide, as darker phantom
+        :param fluid: how much darker the channel is for the fluid in it (0-1), with a mottle
+        :param sheath_m: (k, 2) the inserter's sheath, m, drawn ``sheath_width_m`` wide at
+            grey level ``sheath`` (it ends where the body comes out); None: none
+        :param glare_m: ((centre (2,), radius), ...) specular glare, m: saturated spots
         """
         self.map, self.size = pixel_map, tuple(size)
         self.body, self.magnet, self.blur_px = float(body), float(magnet), float(blur_px)
@@ -182,6 +187,11 @@ class Renderer:
             _fill(walls, _quads(path, width_px + 6.0))
             _fill(channel, _quads(path, width_px))
             bg = bg * (1.0 - 0.25 * walls) + 0.25 * background * channel
+            if fluid > 0:  # the fluid's mottle: smooth noise a few millimetres across
+                mottle = cv2.GaussianBlur(rng.normal(0.0, 1.0, bg.shape).astype(np.float32),
+                                          (0, 0), 25.0)
+                mottle /= max(float(np.abs(mottle).max()), 1e-9)
+                bg = bg * (1.0 - fluid * channel * (0.8 + 0.2 * mottle))
         if len(obstacles_m) or len(walls_m):
             solid = np.zeros(bg.shape, np.float32)
             v, u = np.mgrid[0:bg.shape[0], 0:bg.shape[1]].astype(np.float32)
@@ -194,6 +204,20 @@ class Renderer:
                 line = self.map.to_pixels(resample(np.asarray(wall, float), 2e-4))
                 _fill(solid, _quads(line, wall_width_m / self.map.metres_per_px_at(line[0])))
             bg = bg * (1.0 - 0.25 * solid)
+        v = u = None
+        for centre, radius in glare_m:
+            if u is None:
+                v, u = np.mgrid[0:bg.shape[0], 0:bg.shape[1]].astype(np.float32)
+            centre_px = self.map.to_pixels(np.asarray(centre, float).reshape(1, 2))[0]
+            radius_px = radius / self.map.metres_per_px_at(centre_px)
+            spot = np.exp(-((u - centre_px[0]) ** 2 + (v - centre_px[1]) ** 2)
+                          / (2 * (radius_px / 2) ** 2))
+            bg = bg + (255.0 - bg) * spot
+        if sheath_m is not None:
+            tube = np.zeros(bg.shape, np.float32)
+            line = self.map.to_pixels(np.asarray(sheath_m, float))
+            _fill(tube, _quads(line, sheath_width_m / self.map.metres_per_px_at(line[-1])))
+            bg = bg + tube * (float(sheath) - bg)
         self.background = np.clip(bg, 0, 255).astype(np.uint8)
         self.noise = []
         if noise_sigma > 0:

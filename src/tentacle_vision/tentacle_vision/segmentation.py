@@ -5,7 +5,10 @@ Foreground segmentation: which pixels are the tentacle (no I/O, no ROS).
 to the local background (the default: uneven lighting does not fool it), an adaptive (local
 mean) threshold, a fixed grey level, or a colour range (bgr images only). The
 body is dark on a light background unless ``dark=False``. A light Gaussian blur first keeps
-sensor noise from breaking the body's edge into specks.
+sensor noise from breaking the body's edge into specks. ``changed(image, background)`` is
+the mask against a frame of the empty scene instead: what differs from it, in any colour
+channel (the sheath, the phantom's walls, fluid and glare are in both frames, the body only
+in one).
 """
 
 import cv2
@@ -75,3 +78,33 @@ def contrast(gray, max_width_px=40.0, dark=True, shrink=4):
     small = cv2.morphologyEx(small, cv2.MORPH_CLOSE if dark else cv2.MORPH_OPEN, disc)
     background = cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR)
     return cv2.subtract(background, gray) if dark else cv2.subtract(gray, background)
+
+
+MIN_CHANGE = 12  # grey levels: sensor noise (about 3 sigma of a typical camera) stays out
+
+
+def changed(image, background, blur_px=1.0, min_change=MIN_CHANGE):
+    """
+    Return (mask, threshold used) of what differs from a frame of the empty scene.
+
+    Otsu's threshold of the difference (the largest over the colour channels, so a body of
+    the background's grey but another colour still differs), at least ``min_change`` grey
+    levels, so that a frame with nothing new in it stays empty.
+
+    :param image: mono8 or bgr8, the frame (or a crop of it)
+    :param background: the same size and channels, the empty scene (or the same crop)
+    :raises ValueError: the two differ in size or channels
+    """
+    if image.shape != background.shape:
+        raise ValueError(f'the frame is {image.shape[1::-1]} px x {image.shape[2:] or 1} '
+                         f'channel(s), the background {background.shape[1::-1]} x '
+                         f'{background.shape[2:] or 1}: they must match')
+    difference = cv2.absdiff(image, background)
+    if difference.ndim == 3:
+        difference = difference.max(axis=2)
+    if blur_px > 0:
+        size = 2 * int(round(1.5 * blur_px)) + 1
+        difference = cv2.GaussianBlur(difference, (size, size), blur_px)
+    otsu, _ = cv2.threshold(difference, 0, 255, cv2.THRESH_BINARY | cv2.THRESH_OTSU)
+    used = max(float(otsu), float(min_change))
+    return difference > used, used

@@ -21,7 +21,7 @@ import numpy as np
 
 from tentacle_vision import image_codec
 from tentacle_vision.centreline import bands, end_fit, geodesic_px, loops, refine_end
-from tentacle_vision.segmentation import foreground, to_gray
+from tentacle_vision.segmentation import changed, foreground, to_gray
 
 
 COARSE = 4  # a lost body is looked for in a frame this many times smaller first
@@ -88,14 +88,46 @@ def status_of(track):
 class Tracker:
     """Tip and shape from frames of one camera; keeps the search window between frames."""
 
-    def __init__(self, base_px, pixel_map, settings=None):
-        """Track from the insertion point ``base_px`` (u, v); pixels to metres by pixel_map."""
+    def __init__(self, base_px, pixel_map, settings=None, background=None):
+        """
+        Track from the insertion point ``base_px`` (u, v); pixels to metres by pixel_map.
+
+        :param background: a frame of the empty scene (mono8 or bgr8, the frames' size), or
+            None: with one, the body is what differs from it (segmentation.changed) and the
+            segmentation settings are not used
+        """
         self.base_px = np.asarray(base_px, float).reshape(2)
         if not np.all(np.isfinite(self.base_px)):
             raise ValueError(f'base_px {base_px!r} must be two finite numbers')
         self.map = pixel_map
         self.settings = settings or Settings()
         self.window = None  # (x0, y0, x1, y1) around the last body, or None: whole frame
+        self.set_background(background)
+
+    def set_background(self, background):
+        """Use a frame of the empty scene from now on (mono8 or bgr8); None: none."""
+        self.background = None if background is None else np.ascontiguousarray(background)
+        self._small_background = None  # its COARSE-times smaller copy, made when first needed
+        self.window = None
+
+    def _mask(self, crop, window, small=False):
+        """Return the body mask of a crop (of a frame COARSE times smaller if small)."""
+        s = self.settings
+        if self.background is None:
+            return foreground(crop, s.segmentation, dark=s.dark, threshold=s.threshold,
+                              block_px=max(s.block_px // COARSE, 3) if small else s.block_px,
+                              offset=s.offset, colour_low=s.colour_low,
+                              colour_high=s.colour_high, blur_px=0.0 if small else s.blur_px,
+                              max_width_px=s.max_width_px / (COARSE if small else 1))[0]
+        x0, y0, x1, y1 = window
+        background = self._small_background if small else self.background
+        return changed(crop, background[y0:y1, x0:x1], 0.0 if small else s.blur_px)[0]
+
+    def _colour(self):
+        """Return whether crops are taken in colour (colour segmentation or background)."""
+        if self.background is not None:
+            return self.background.ndim == 3
+        return self.settings.segmentation == 'colour'
 
     def track(self, image, encoding='mono8'):
         """
@@ -130,12 +162,8 @@ class Tracker:
         full = (x0, y0) == (0, 0) and (x1, y1) == image.shape[1::-1]
         if encoding == 'bayer_rggb8':  # keep the mosaic's phase: even corners
             x0, y0 = x0 & ~1, y0 & ~1
-        crop = image_codec.for_tracking(encoding, image[y0:y1, x0:x1],
-                                        colour=s.segmentation == 'colour')
-        mask, _ = foreground(crop, s.segmentation, dark=s.dark, threshold=s.threshold,
-                             block_px=s.block_px, offset=s.offset, colour_low=s.colour_low,
-                             colour_high=s.colour_high, blur_px=s.blur_px,
-                             max_width_px=s.max_width_px)
+        crop = image_codec.for_tracking(encoding, image[y0:y1, x0:x1], colour=self._colour())
+        mask = self._mask(crop, (x0, y0, x1, y1))
         base = self.base_px - (x0, y0)
         lost = Track(False, '', window=(x0, y0, x1 - x0, y1 - y0), full_frame=full)
         seed = self._seed(mask, base)
@@ -176,20 +204,24 @@ class Tracker:
     def _coarse_window(self, image, encoding):
         """Return the window of the body found in a frame COARSE times smaller, or None."""
         s = self.settings
-        if s.segmentation == 'colour':
+        if s.segmentation == 'colour' and self.background is None:
             return None
-        if encoding == 'bayer_rggb8':
+        if encoding == 'bayer_rggb8' and not self._colour():
             small = image[0::2, 1::2]  # the green sites: a half-size grey frame, for free
             step = 2
         else:
-            small = image_codec.for_tracking(encoding, image)
+            small = image_codec.for_tracking(encoding, image, colour=self._colour())
             step = 1
         shrink = COARSE // step
         h, w = small.shape[:2]
         small = cv2.resize(small, (w // shrink, h // shrink), interpolation=cv2.INTER_AREA)
-        mask, _ = foreground(small, s.segmentation, dark=s.dark, threshold=s.threshold,
-                             block_px=max(s.block_px // COARSE, 3), offset=s.offset,
-                             blur_px=0.0, max_width_px=s.max_width_px / COARSE)
+        if self.background is not None and self._small_background is None:
+            bh, bw = self.background.shape[:2]
+            self._small_background = cv2.resize(self.background, (bw // COARSE, bh // COARSE),
+                                                interpolation=cv2.INTER_AREA)
+        if self.background is not None and self._small_background.shape != small.shape:
+            return None   # the frame is not the background's size: the full-size pass says so
+        mask = self._mask(small, (0, 0, small.shape[1], small.shape[0]), small=True)
         seed = self._seed(mask, self.base_px / COARSE, s.base_search_px / COARSE + 1)
         if seed is None:
             return None

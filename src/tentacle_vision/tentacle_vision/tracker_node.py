@@ -14,6 +14,15 @@ with the frame's own header stamp and frame ``workspace``:
 - /vision/debug_image (sensor_msgs/Image, bgr8) at ``debug_rate``, scaled by ``debug_scale``
 - /diagnostics: tracking, loop or lost (and why), processing time, frames and losses.
 
+With ``background_image`` (a frame of the scene without the tentacle), the body is what
+differs from it, colour included: the inserter's sheath, the phantom's walls, fluid and
+glare are in both frames and stay out of the body. /vision/capture_background
+(std_srvs/Trigger) takes the latest frame as that background, writes it to
+``background_image`` (or /tmp/tentacle_background.png when none is set) and uses it from
+the next frame: call it with nothing inserted. A ``background_image`` that is not there yet
+is waited for (tracking without it, a warning says so); one that is not an image stops the
+node at start.
+
 When no body is found, or its tip is out of the frame, nothing is published for that frame:
 never a stale or made-up tip. The pipeline is tentacle_vision.tracker (no rclpy).
 """
@@ -21,9 +30,11 @@ never a stale or made-up tip. The pipeline is tentacle_vision.tracker (no rclpy)
 import collections
 from dataclasses import replace
 import math
+import os
 import sys
 import time
 
+import cv2
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Path
@@ -31,7 +42,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import Image, JointState
 from tentacle_common import contract
 from tentacle_common.driver_node import (declare_parameters, diagnostic_status, publisher,
-                                         run_node, subscription)
+                                         run_node, service, subscription)
 from tentacle_common.errors import ConfigError
 from tentacle_vision import image_codec
 from tentacle_vision.annotate import annotate
@@ -42,6 +53,7 @@ from tentacle_vision.segmentation import METHODS
 from tentacle_vision.tracker import Settings, status_of, Tracker
 
 FRAME_ID = contract.WORKSPACE_FRAME
+DEFAULT_BACKGROUND = '/tmp/tentacle_background.png'  # a capture goes here without a path
 TIMES_KEPT = 200  # processing times behind the diagnostics' median and p95
 
 
@@ -79,10 +91,14 @@ class TrackerNode(Node):
         h = [float(v) for v in p['homography']]
         settings = Settings(**{k: (tuple(p[k]) if isinstance(p[k], list) else p[k])
                                for k in Settings.__dataclass_fields__})
+        self.background_path = p['background_image'] or DEFAULT_BACKGROUND
         try:
+            waiting = p['background_image'] and not os.path.exists(p['background_image'])
+            background = (image_codec.read_background(p['background_image'])
+                          if p['background_image'] and not waiting else None)
             self.tracker = Tracker(p['base_px'], pixel_map(p['metres_per_px'],
                                                            h if any(h) else (), p['base_px']),
-                                   settings)
+                                   settings, background)
         except ValueError as exc:
             raise ConfigError(str(exc)) from None
         warm_up()  # the first frame must not wait for the compiled pass to load
@@ -96,6 +112,13 @@ class TrackerNode(Node):
         subscription(self, replace(contract.IMAGE, name=p['image_topic']), self.on_image,
                      image_qos(p['image_reliability']))
         self.create_timer(1.0, self.publish_diagnostics)
+        service(self, contract.VISION_CAPTURE_BACKGROUND, self.on_capture_background)
+        if waiting:
+            self.get_logger().warning(
+                f"background_image {p['background_image']} is not there yet: tracking without "
+                f'one until {contract.VISION_CAPTURE_BACKGROUND.name} writes it (call it with '
+                'nothing inserted)')
+        self.latest_frame = None   # (encoding, decoded image): what a capture takes
         self.image_topic = p['image_topic']
         self.times = collections.deque(maxlen=TIMES_KEPT)
         self.frames = self.lost = self.loops = 0
@@ -109,6 +132,7 @@ class TrackerNode(Node):
         try:
             image = image_codec.from_message(msg.encoding, msg.height, msg.width, msg.step,
                                              msg.data)
+            self.latest_frame = msg.encoding, image
             track = self.tracker.track(image, msg.encoding)
         except ValueError as exc:
             self.last_problem = str(exc)
@@ -142,6 +166,25 @@ class TrackerNode(Node):
             self.debug_pub.publish(Image(header=header, height=height, width=width,
                                          encoding='bgr8', step=step, data=data))
 
+    def on_capture_background(self, _request, response):
+        """Take the latest frame as the empty scene: write it, track against it."""
+        if self.latest_frame is None:
+            response.success, response.message = False, f'no frame yet on {self.image_topic}'
+            return response
+        encoding, image = self.latest_frame
+        background = image_codec.for_tracking(encoding, image,
+                                              colour=encoding != 'mono8')
+        if not cv2.imwrite(self.background_path, background):
+            response.success = False
+            response.message = f'{self.background_path}: could not be written'
+            return response
+        self.tracker.set_background(background)
+        response.success = True
+        response.message = (f'background {background.shape[1]} x {background.shape[0]} px '
+                            f'written to {self.background_path}, in use')
+        self.get_logger().info(response.message)
+        return response
+
     def publish_diagnostics(self):
         """Publish one status: tracking, loop or lost, and the processing time."""
         track = self.last
@@ -157,7 +200,9 @@ class TrackerNode(Node):
                   if ordered else '',
                   'processing_p95_ms': round(1e3 * ordered[int(0.95 * (len(ordered) - 1))], 3)
                   if ordered else '',
-                  'full_frame_search': track.full_frame if track else ''}
+                  'full_frame_search': track.full_frame if track else '',
+                  'background': self.background_path if self.tracker.background is not None
+                  else 'none'}
         msg = DiagnosticArray(status=[diagnostic_status(f'{TRACKER_NODE}: tip', self.image_topic,
                                                         level, message, values)])
         msg.header.stamp = self.get_clock().now().to_msg()

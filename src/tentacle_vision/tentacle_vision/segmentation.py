@@ -89,7 +89,9 @@ def changed(image, background, blur_px=1.0, min_change=MIN_CHANGE):
 
     Otsu's threshold of the difference (the largest over the colour channels, so a body of
     the background's grey but another colour still differs), at least ``min_change`` grey
-    levels, so that a frame with nothing new in it stays empty.
+    levels, so that a frame with nothing new in it stays empty; then opened with a 3 x 3
+    square, so that the one- or two-pixel lines a camera nudged since the background left
+    along every edge do not join the body to the scene.
 
     :param image: mono8 or bgr8, the frame (or a crop of it)
     :param background: the same size and channels, the empty scene (or the same crop)
@@ -107,4 +109,6 @@ def changed(image, background, blur_px=1.0, min_change=MIN_CHANGE):
         difference = cv2.GaussianBlur(difference, (size, size), blur_px)
     otsu, _ = cv2.threshold(difference, 0, 255, cv2.THRESH_BINARY | cv2.THRESH_OTSU)
     used = max(float(otsu), float(min_change))
-    return difference > used, used
+    mask = cv2.morphologyEx((difference > used).astype(np.uint8), cv2.MORPH_OPEN,
+                            np.ones((3, 3), np.uint8))
+    return mask > 0, used

@@ -238,3 +238,13 @@ def test_a_background_of_another_size_is_refused_naming_both():
     with pytest.raises(ValueError, match=r'the frame is \(2048, 1536\) px .* the background '
                                          r'\(200, 100\)'):
         tracker.track(renderer.render(shape('straight'), WIDTH_M).image)
+
+
+def test_a_camera_nudged_two_pixels_since_the_background_still_tracks():
+    renderer = rig_renderer()
+    empty = renderer.render(np.array([[0.0, 0.0], [1e-9, 0.0]]), WIDTH_M).image
+    nudged = np.roll(empty, (2, 2), axis=(0, 1))   # every edge of the scene moved 2 px
+    truth = renderer.render(shape('90'), WIDTH_M)
+    track = Tracker(BASE_PX, MAP, background=nudged).track(truth.image)
+    assert track.found, track.reason
+    assert errors(track, truth)[0] < 1.0

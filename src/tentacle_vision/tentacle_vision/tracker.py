@@ -166,15 +166,20 @@ class Tracker:
         mask = self._mask(crop, (x0, y0, x1, y1))
         base = self.base_px - (x0, y0)
         lost = Track(False, '', window=(x0, y0, x1 - x0, y1 - y0), full_frame=full)
-        seed = self._seed(mask, base)
-        if seed is None:
+        found = self._component(mask, base)
+        if found is not None and found[3].any():
+            # Joined to something that runs off the window: the inserter's sheath, say, is
+            # dark too. What is wider than the body can be is not body: without it, again.
+            narrow = without_wide_parts(mask, s.max_width_px)
+            if narrow is not mask:
+                retry = self._component(narrow, base)
+                if retry is not None and not retry[3].any():
+                    mask, found = narrow, retry
+        if found is None:
             lost.reason = (f'no body within {s.base_search_px:g} px of the insertion point '
                            f'{tuple(np.round(self.base_px, 1))}')
             return lost
-        rows, cols, dist = geodesic_px(mask, seed)   # the seed's component, and distances
-        h, w = mask.shape
-        edge = (rows == 0) | (cols == 0) | (rows == h - 1) | (cols == w - 1)
-        edge &= (cols - base[0]) ** 2 + (rows - base[1]) ** 2 > (2 * s.base_search_px) ** 2
+        rows, cols, dist, edge = found
         if edge.any():
             if not full:
                 return None  # it leaves the window: look at the whole frame
@@ -237,6 +242,23 @@ class Tracker:
         x1, y1 = np.minimum(hi, (width, height)).astype(int)
         return int(x0), int(y0), int(x1), int(y1)
 
+    def _component(self, mask, base):
+        """
+        Return (rows, cols, geodesic distance, at the mask's edge) of the body's component.
+
+        At the edge: its pixels on the mask's border, away from the insertion point. None: no
+        body near the insertion point.
+        """
+        seed = self._seed(mask, base)
+        if seed is None:
+            return None
+        rows, cols, dist = geodesic_px(mask, seed)   # the seed's component, and distances
+        h, w = mask.shape
+        edge = (rows == 0) | (cols == 0) | (rows == h - 1) | (cols == w - 1)
+        edge &= (cols - base[0]) ** 2 + (rows - base[1]) ** 2 > (
+            2 * self.settings.base_search_px) ** 2
+        return rows, cols, dist, edge
+
     def _seed(self, mask, base, reach_px=None):
         """Return the body pixel (row, col) nearest the base within reach, or None."""
         r = self.settings.base_search_px if reach_px is None else reach_px
@@ -280,3 +302,20 @@ class Tracker:
         x0, y0 = np.maximum(lo, 0).astype(int)
         x1, y1 = np.minimum(hi, (width, height)).astype(int)
         return int(x0), int(y0), int(x1), int(y1)
+
+
+def without_wide_parts(mask, max_width_px):
+    """
+    Return the mask without what is wider than max_width_px (the mask itself if nothing is).
+
+    A part is too wide where the distance to the mask's edge exceeds half the width; it is
+    removed with everything within half a width of it, so a wide dark thing (the sheath the
+    body comes out of) goes whole and the body beside it stays.
+    """
+    distance = cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, 3)
+    core = distance > 0.5 * max_width_px + 1.0
+    if not core.any():
+        return mask
+    r = int(np.ceil(0.5 * max_width_px)) + 2
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+    return mask & (cv2.dilate(core.view(np.uint8), disc) == 0)

@@ -127,21 +127,13 @@ class SimNode(Node):
             next_at = max(next_at, time.monotonic() - self.period_s)  # behind: do not catch up
 
     def tick(self):
-        """Sample the devices, solve, render and publish one frame under its stamp."""
+        """Sample the devices, solve, publish the truth, then render and publish the frame."""
         stamp = self.get_clock().now().to_msg()
         currents = self.devices.currents_a()
         inserter = self.devices.travel_m('inserter')
         backbone = self.devices.travel_m('backbone') if self.world.has_backbone else 0.0
         body = self.world.step(currents, inserter, backbone)
-        t0 = time.perf_counter()
-        frame, _ = self.camera.frame(body.points_m, self.width_m,
-                                     self.world.magnet_ranges_m(body.inserted_m))
-        render_s = time.perf_counter() - t0
-        self.image.header.stamp = stamp
-        self.pixels[...] = frame
-        self.image_pub.publish(self.image)
-        self.info_pub.publish(CameraInfo(header=self.image.header, height=self.image.height,
-                                         width=self.image.width))
+        # The truth first: it does not wait for the frame's drawing and serialising.
         shape = Path()
         shape.header.stamp, shape.header.frame_id = stamp, contract.COILS_FRAME
         shape.poses = [PoseStamped(header=shape.header) for _ in body.points_m]
@@ -153,6 +145,15 @@ class SimNode(Node):
         contact.header.stamp, contact.header.frame_id = stamp, contract.COILS_FRAME
         self.contact_pub.publish(contact)
         self.body = body
+        t0 = time.perf_counter()
+        frame, _ = self.camera.frame(body.points_m, self.width_m,
+                                     self.world.magnet_ranges_m(body.inserted_m))
+        render_s = time.perf_counter() - t0
+        self.image.header.stamp = stamp
+        self.pixels[...] = frame
+        self.image_pub.publish(self.image)
+        self.info_pub.publish(CameraInfo(header=self.image.header, height=self.image.height,
+                                         width=self.image.width))
         self.rate.tick(body.solve_s, render_s)
 
     # -- markers and diagnostics ------------------------------------------------------------

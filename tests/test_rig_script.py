@@ -81,6 +81,13 @@ def test_sim_up_and_down_drivers_first_a_second_ctrl_c_waits(tmp_path):
         0.005 / 1.07e-3, abs=0.02)
     holding.send_signal(signal.SIGINT)
     assert holding.wait(20) == 0 and 'stopped holding' in holding.stdout.read()
+    watching = subprocess.Popen([str(ROOT / 'scripts' / 'rig-command'), 'watch', '--rate',
+                                 '5'], stdout=subprocess.PIPE, text=True)
+    time.sleep(3.0)   # a few lines of what it hears
+    watching.send_signal(signal.SIGINT)
+    assert watching.wait(20) == 0
+    seen = watching.stdout.read()
+    assert 'tip (truth) [' in seen and 'stopped watching' in seen and 'Traceback' not in seen
     os.killpg(rig.popen.pid, signal.SIGINT)
     assert wait_for(lambda: 'rig: coils_node stopped' in rig.text()
                     or 'rig: inserter_node stopped' in rig.text()

@@ -21,11 +21,14 @@ refused or did not answer, 2 a usage error.
 
 import argparse
 import math
+import signal
 import sys
+import threading
 import time
 
 from geometry_msgs.msg import Vector3Stamped
 import rclpy
+from rclpy.executors import SingleThreadedExecutor
 from std_msgs.msg import Bool, Float64
 from std_srvs.srv import SetBool, Trigger
 from tentacle_common import contract
@@ -139,14 +142,20 @@ def run(node, opts):
 
 def watch(node, rate_hz):
     """Print the latest truth, tracked tip and contact until Ctrl-C."""
+    # Ctrl-C only sets a flag: raised inside rclpy's taking of a message, KeyboardInterrupt
+    # comes out as a RuntimeError from its C++ layer.
+    stop = threading.Event()
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
     latest = {}
     subscription(node, contract.SIM_SHAPE, lambda m: latest.__setitem__('shape', m))
     subscription(node, contract.VISION_TIP, lambda m: latest.__setitem__('tip', m))
     subscription(node, contract.SIM_CONTACT, lambda m: latest.__setitem__('contact', m))
     subscription(node, contract.FIELD, lambda m: latest.__setitem__('field', m))
     next_at = time.monotonic()
-    while True:
-        rclpy.spin_once(node, timeout_sec=0.05)
+    while not stop.is_set():
+        executor.spin_once(timeout_sec=0.05)
         if time.monotonic() < next_at:
             continue
         next_at += 1.0 / rate_hz
@@ -164,6 +173,8 @@ def watch(node, rate_hz):
             count, depth = latest['contact'].position
             parts.append(f'contact {int(count)} ({depth * 1e3:.2f} mm)')
         print('  '.join(parts) or 'nothing heard yet', flush=True)
+    executor.shutdown()
+    return True, 'stopped watching'
 
 
 def main(args=None):

@@ -20,11 +20,11 @@ import yaml
 pytestmark = pytest.mark.ros
 
 
-class RigScript:
-    """scripts/rig in a process of its own, its output collected line by line."""
+class Script:
+    """A script of scripts/ in a process of its own, its output collected line by line."""
 
-    def __init__(self, *args):
-        self.popen = subprocess.Popen([str(ROOT / 'scripts' / 'rig'), *map(str, args)],
+    def __init__(self, name, *args):
+        self.popen = subprocess.Popen([str(ROOT / 'scripts' / name), *map(str, args)],
                                       stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                       text=True, start_new_session=True)
         self.lines = []
@@ -52,6 +52,29 @@ class RigScript:
     def stopped_order(self):
         return [x.split()[1] for x in self.lines if ' stopped (exit ' in x]
 
+    def close(self):
+        """Stop it if a failed test left it running: Ctrl-C (the rig stops in order)."""
+        if self.popen.poll() is None:
+            os.killpg(self.popen.pid, signal.SIGINT)
+            try:
+                self.popen.wait(90.0)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.popen.pid, signal.SIGKILL)
+                self.popen.wait()
+
+
+@pytest.fixture
+def script():
+    """Return a factory of Scripts; any still running at the end is stopped (a rig too)."""
+    started = []
+
+    def start(name, *args):
+        started.append(Script(name, *args))
+        return started[-1]
+    yield start
+    for handle in reversed(started):
+        handle.close()
+
 
 def cantilever_scene(folder):
     path = folder / 'scene.yaml'
@@ -62,9 +85,9 @@ def cantilever_scene(folder):
     return path
 
 
-def test_sim_up_and_down_drivers_first_a_second_ctrl_c_waits(tmp_path):
-    rig = RigScript('--sim', cantilever_scene(tmp_path), '--device-dir', tmp_path / 'dev',
-                    '--logs', tmp_path / 'logs')
+def test_sim_up_and_down_drivers_first_a_second_ctrl_c_waits(tmp_path, script):
+    rig = script('rig', '--sim', cantilever_scene(tmp_path), '--device-dir', tmp_path / 'dev',
+                 '--logs', tmp_path / 'logs')
     assert rig.up(), rig.text()
     assert 'DDS discovery LOCALHOST' in rig.text()
     # Driven from another terminal, as a lab user would: the devices say it happened.
@@ -72,22 +95,23 @@ def test_sim_up_and_down_drivers_first_a_second_ctrl_c_waits(tmp_path):
     assert command('insert', '0.005').returncode == 0
     assert wait_for(lambda: ask(tmp_path / 'dev', {'op': 'state'})['inserter'][
         'position_m'] == pytest.approx(0.005, abs=1e-5), 10.0)
-    holding = subprocess.Popen([str(ROOT / 'scripts' / 'rig-command'), 'field', '0', '0.005',
-                                '0'], stdout=subprocess.PIPE, text=True)
+    holding = script('rig-command', 'field', '0', '0.005', '0')
     assert wait_for(lambda: ask(tmp_path / 'dev', {'op': 'state'})['coil_y'][
         'current_a'] == pytest.approx(0.005 / 1.07e-3, abs=0.02), 20.0)
     time.sleep(1.5)   # past coils_node's 1 s watchdog: still held
     assert ask(tmp_path / 'dev', {'op': 'state'})['coil_y']['current_a'] == pytest.approx(
         0.005 / 1.07e-3, abs=0.02)
-    holding.send_signal(signal.SIGINT)
-    assert holding.wait(20) == 0 and 'stopped holding' in holding.stdout.read()
-    watching = subprocess.Popen([str(ROOT / 'scripts' / 'rig-command'), 'watch', '--rate',
-                                 '5'], stdout=subprocess.PIPE, text=True)
-    time.sleep(3.0)   # a few lines of what it hears
-    watching.send_signal(signal.SIGINT)
+    holding.popen.send_signal(signal.SIGINT)
+    assert holding.wait(20) == 0
+    assert wait_for(lambda: 'stopped holding' in holding.text(), 5.0), holding.text()
+    # Watching: the simulator's truth reaches it once discovery has matched them (seconds
+    # on a loaded machine).
+    watching = script('rig-command', 'watch', '--rate', '5')
+    assert wait_for(lambda: 'tip (truth) [' in watching.text(), 60.0), watching.text()
+    watching.popen.send_signal(signal.SIGINT)
     assert watching.wait(20) == 0
-    seen = watching.stdout.read()
-    assert 'tip (truth) [' in seen and 'stopped watching' in seen and 'Traceback' not in seen
+    assert wait_for(lambda: 'stopped watching' in watching.text(), 5.0), watching.text()
+    assert 'Traceback' not in watching.text()
     os.killpg(rig.popen.pid, signal.SIGINT)
     assert wait_for(lambda: 'rig: coils_node stopped' in rig.text()
                     or 'rig: inserter_node stopped' in rig.text()
@@ -102,9 +126,9 @@ def test_sim_up_and_down_drivers_first_a_second_ctrl_c_waits(tmp_path):
     assert not (tmp_path / 'dev' / 'coil_x').exists()   # the simulator went last, links too
 
 
-def test_a_node_that_dies_stops_the_rig_safely_and_says_so(tmp_path):
-    rig = RigScript('--sim', cantilever_scene(tmp_path), '--device-dir', tmp_path / 'dev',
-                    '--logs', tmp_path / 'logs', '--no-tracker')
+def test_a_node_that_dies_stops_the_rig_safely_and_says_so(tmp_path, script):
+    rig = script('rig', '--sim', cantilever_scene(tmp_path), '--device-dir', tmp_path / 'dev',
+                 '--logs', tmp_path / 'logs', '--no-tracker')
     assert rig.up(), rig.text()
     os.kill(rig.pid('inserter_node'), signal.SIGKILL)
     assert rig.wait() == 1, rig.text()
@@ -113,7 +137,7 @@ def test_a_node_that_dies_stops_the_rig_safely_and_says_so(tmp_path):
     assert 'NOT confirmed safe: inserter_node' in rig.text()   # it could not say
 
 
-def test_real_table_on_a_labs_params_files(tmp_path):
+def test_real_table_on_a_labs_params_files(tmp_path, script):
     supplies = EmulatorProcess(tmp_path / 'ports', 'scpi', 115200)
     stages = StageEmulatorProcess(tmp_path / 'ports')
     try:
@@ -126,7 +150,7 @@ def test_real_table_on_a_labs_params_files(tmp_path):
         inserter = yaml.safe_load((ROOT / 'config/sim/inserter.yaml').read_text())
         inserter['inserter_node']['ros__parameters']['port'] = stages.ports['inserter']
         (config / 'inserter.yaml').write_text(yaml.safe_dump(inserter))
-        rig = RigScript('--real', config, '--logs', tmp_path / 'logs')
+        rig = script('rig', '--real', config, '--logs', tmp_path / 'logs')
         assert rig.up(), rig.text()
         assert wait_for(lambda: all(s['output_on'] for s in supplies.state().values()), 30.0)
         os.killpg(rig.popen.pid, signal.SIGTERM)
@@ -151,7 +175,7 @@ def test_a_command_without_a_rig_says_so_and_a_bad_one_is_a_usage_error():
     assert command('--axis', 'in-serter', 'home').returncode == 2
 
 
-def test_usage_errors_exit_2(tmp_path):
+def test_usage_errors_exit_2(tmp_path, script):
     for args in (['--sim', tmp_path / 'absent.yaml'], ['--real', tmp_path],
                  ['--real', tmp_path, '--no-tracker'], []):
-        assert RigScript(*args).wait(30.0) == 2
+        assert script('rig', *args).wait(30.0) == 2

@@ -7,10 +7,9 @@ the real one (``real_table``: the same drivers on a lab's params files). ``Rig``
 entry as its own process, as deployed (``python -m``, its own session: a Ctrl-C at the
 terminal reaches the bringup only, which stops the rest in order), starts each once the one
 before says it runs (so the simulator's devices are linked before the drivers open them),
-and stops the drivers first (the supplies at
-zero and off, the axes stopped, each confirmed by the driver's last line), then the
-watchers, then the simulator. scripts/rig runs it; the tests and benches start the rig with
-it too, so the table they test is the one a lab runs.
+and stops the drivers first (the supplies at zero and off, the axes stopped, each confirmed
+by the driver's last line), then the watchers, then the simulator. scripts/rig runs it; the
+tests and benches start the rig with it too, so the table they test is the one a lab runs.
 """
 
 from dataclasses import dataclass

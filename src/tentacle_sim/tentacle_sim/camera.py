@@ -5,8 +5,10 @@ A camera looking down ``coils`` z, calibrated as tracker_node is (``metres_per_p
 insertion point at ``base_px``): the scene's nominal insertion point is the ``workspace``
 origin (tentacle_common.frames), so a mismatch that moves the real insertion point shows as
 a body that starts off ``base_px``, as on the rig. The phantom (a channel along the path,
-the scene's obstacles and walls) is drawn into the background once; each frame draws the
-body with tentacle_vision's renderer (its magnetised segments darker).
+the scene's obstacles and walls) and, with ``artefacts``, what a rig's camera sees besides
+(the inserter's dark sheath up to the insertion point, fluid in the channel, glare on its
+walls) are drawn into the background once; each frame draws the body with
+tentacle_vision's renderer (its magnetised segments darker).
 """
 
 import numpy as np

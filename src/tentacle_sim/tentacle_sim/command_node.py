@@ -29,6 +29,7 @@ import time
 from geometry_msgs.msg import Vector3Stamped
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Bool, Float64
 from std_srvs.srv import SetBool, Trigger
 from tentacle_common import contract
@@ -111,14 +112,11 @@ def run(node, opts):
             time.sleep(0.2)
             return True, f'{what} commanded once (coils_node logs a refusal)'
         print(f'rig-command: holding {what} (re-sent at 5 Hz); Ctrl-C to stop', flush=True)
-        try:
-            while True:
-                time.sleep(0.2)
-                msg.header.stamp = node.get_clock().now().to_msg()
-                pub.publish(msg)
-        except KeyboardInterrupt:
-            return True, f'stopped holding {what}: it ramps to zero within watchdog_s'
-
+        stop = until_ctrl_c()
+        while not stop.wait(0.2):
+            msg.header.stamp = node.get_clock().now().to_msg()
+            pub.publish(msg)
+        return True, f'stopped holding {what}: it ramps to zero within watchdog_s'
     if opts.command == 'insert':
         problem = _published(node, contract.axis_target(opts.axis),
                              Float64(data=opts.position_m), opts.wait_s)
@@ -140,12 +138,19 @@ def run(node, opts):
     return watch(node, opts.rate)
 
 
+def until_ctrl_c():
+    """Return an Event that Ctrl-C (or SIGTERM) sets from now on."""
+    # A flag, not KeyboardInterrupt: raised inside rclpy (a publish, a take), that comes out
+    # of its C++ layer as a RuntimeError.
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    return stop
+
+
 def watch(node, rate_hz):
     """Print the latest truth, tracked tip and contact until Ctrl-C."""
-    # Ctrl-C only sets a flag: raised inside rclpy's taking of a message, KeyboardInterrupt
-    # comes out as a RuntimeError from its C++ layer.
-    stop = threading.Event()
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    stop = until_ctrl_c()
     executor = SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
     latest = {}
@@ -183,12 +188,12 @@ def main(args=None):
     if not contract.is_name_token(opts.axis):
         print(f'rig-command: --axis {opts.axis!r} is not one ROS name token', file=sys.stderr)
         sys.exit(2)
-    rclpy.init()
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)   # Ctrl-C is ours
     node = rclpy.create_node('rig_command')
     try:
         ok, message = run(node, opts)
-    except KeyboardInterrupt:
-        ok, message = True, 'stopped watching'
+    except KeyboardInterrupt:   # while waiting for the rig or its answer
+        ok, message = False, f'interrupted: {opts.command} not confirmed'
     finally:
         node.destroy_node()
         rclpy.try_shutdown()

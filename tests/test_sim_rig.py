@@ -119,13 +119,14 @@ def test_the_tracker_finds_the_rendered_tip_within_0_3_mm_of_the_truth(rig):
 def test_contact_with_the_ball_is_reported_with_the_depth_the_shape_has(rig):
     probe, _, _ = rig
     since = time.monotonic()
-    assert wait_for(lambda: len(probe.every('contact', since)) >= 3, 10.0)
-    shapes = {stamp_s(m): points_of(m) for m in probe.every('shape', since - 5.0)}
+
+    def pairs():   # a contact report and the shape under its stamp (see the tracker's test)
+        shapes = {stamp_s(m): points_of(m) for m in probe.every('shape', since - 5.0)}
+        return [(c, shapes[stamp_s(c)]) for c in probe.every('contact', since)
+                if stamp_s(c) in shapes]
+    assert wait_for(lambda: len(pairs()) >= 3, 30.0)
     checked = 0
-    for contact in probe.every('contact', since):
-        points = shapes.get(stamp_s(contact))
-        if points is None:
-            continue
+    for contact, points in pairs():
         a, b = points[:-1], points[1:]   # each link a capsule of the rod's radius
         t = np.clip(np.einsum('ij,ij->i', BALL_CENTRE_M - a, b - a)
                     / np.einsum('ij,ij->i', b - a, b - a), 0.0, 1.0)

@@ -1,6 +1,5 @@
 """A ROS node for tests of the simulated rig: commands it as a lab would, records its truth."""
 
-import math
 import threading
 import time
 
@@ -156,8 +155,3 @@ def arc_length_m(points):
     return float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1))) if len(points) > 1 \
         else 0.0
 
-
-def bend_rad(points):
-    """Return the angle between the first and the last link, rad."""
-    a, b = points[1] - points[0], points[-1] - points[-2]
-    return math.acos(max(-1.0, min(1.0, float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b))))))

@@ -154,4 +154,3 @@ def arc_length_m(points):
     """Return the length of a polyline (N, 3), m."""
     return float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1))) if len(points) > 1 \
         else 0.0
-

@@ -49,7 +49,7 @@ from tentacle_common.child_process import child_pids  # noqa: E402
 from tentacle_common.driver_node import client, publisher, subscription  # noqa: E402
 from tentacle_common.waiting import wait_for  # noqa: E402
 from tentacle_planner.scene import load_scene  # noqa: E402
-from tentacle_sim.bringup import Rig, sim_table  # noqa: E402
+from tentacle_rig.bringup import Rig, sim_table  # noqa: E402
 from tentacle_sim.sim_devices import ask  # noqa: E402
 
 FIELDS_T = ([0.0, 0.010, 0.0], [0.008, -0.004, 0.0])

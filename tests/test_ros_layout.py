@@ -30,7 +30,9 @@ EXECUTABLES = {  # DESIGN.md, "Packages" ('-': a package without executables)
 MORE_EXECUTABLES = {  # ours beyond DESIGN.md's table
     'tentacle_coils': ['calibrate_coils'],
     'tentacle_vision': ['calibrate_camera'],
+    'tentacle_rig': ['rig', 'rig_command'],
 }
+MORE_PACKAGES = ['tentacle_rig']  # beyond DESIGN.md's table: the rig as a whole
 COLCON = str(pathlib.Path(sys.executable).parent / 'colcon')
 
 
@@ -78,14 +80,15 @@ def sourced(install, command, env_extra=None, **kwargs):
 def test_every_package_is_ament_python():
     listing = subprocess.run([COLCON, 'list'], cwd=ROOT / 'ros_ws', capture_output=True,
                              text=True, timeout=60).stdout
-    for package in EXECUTABLES:
+    for package in [*EXECUTABLES, *MORE_PACKAGES]:
         assert re.search(rf'^{package}\s+src/{package}\s+\(ros\.ament_python\)$', listing,
                          re.M), listing
 
 
 def test_executables_are_installed_and_indexed(workspace):
     layout, install = workspace
-    for package, executables in EXECUTABLES.items():
+    for package, executables in [*EXECUTABLES.items(), *((p, MORE_EXECUTABLES.get(p, []))
+                                                         for p in MORE_PACKAGES)]:
         marker = (install if layout == 'merge' else install / package) / \
             'share/ament_index/resource_index/packages' / package
         assert marker.exists(), f'{package} is not in the ament index'

@@ -17,7 +17,7 @@ import pytest
 from rig_support import ROOT, wait_for
 from sim_probe import arc_length_m, points_of, SimProbe, stamp_s
 from tentacle_model.elastica import cantilever_tip
-from tentacle_sim.bringup import Rig, sim_table
+from tentacle_rig.bringup import Rig, sim_table
 from tentacle_sim.sim_devices import ask
 import yaml
 

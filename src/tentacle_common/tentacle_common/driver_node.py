@@ -288,7 +288,7 @@ def run_node(argv, node_name, table, doc, make_node, stop_safely):
         node = make_node()
         for warning in warnings:
             node.get_logger().warning(warning)
-        # What a bringup waits for (tentacle_sim.bringup): built, its devices opened.
+        # What a bringup waits for (tentacle_rig.bringup): built, its devices opened.
         print(f'{node_name}: running', file=sys.stderr, flush=True)
         spin_until_signal(node)
     except (KeyboardInterrupt, ExternalShutdownException):

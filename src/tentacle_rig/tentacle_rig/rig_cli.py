@@ -64,7 +64,7 @@ def discovery_note(environ):
 
 def table_of(opts, parser):
     """Return the process table the options ask for (a usage error if they do not fit)."""
-    from tentacle_sim import bringup
+    from tentacle_rig import bringup
     if opts.real:
         if opts.device_dir or opts.no_tracker or opts.sim_param:
             parser.error('--device-dir, --no-tracker and --sim-param go with --sim')
@@ -83,7 +83,7 @@ def main(args=None):
     parser = build_parser()
     opts = parser.parse_args(args)
     from tentacle_planner.errors import PlanInputError
-    from tentacle_sim.bringup import Rig, RigError
+    from tentacle_rig.bringup import Rig, RigError
     from tentacle_sim.params import DEFAULT_DEVICE_DIR
     try:
         table = table_of(opts, parser)

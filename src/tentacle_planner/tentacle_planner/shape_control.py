@@ -1,0 +1,206 @@
+"""
+Closed loop on the tracked shape: the field correction that brings the body onto its path.
+
+``ShapeController.correct`` takes the field held now and the centreline the camera sees
+(coils x, y: the camera looks down z), compares it with the reference at equal arc lengths
+from the insertion point (the desired path, as the shape error is measured, or the step's
+planned centreline) and returns the field that the model's sensitivity of shape to field
+says removes that error: a damped Gauss-Newton step, solved as a bounded least-squares
+problem so it keeps within the coils' per-axis limits and the largest change per iteration,
+then scaled into the total-field limit. The camera sees no depth, so only the in-plane
+field components are corrected (the out-of-plane one stays as planned).
+``TipAngleController`` is the thesis' simple baseline (eq. 6.10): the field's in-plane
+angle moves by K_P times the tip-angle error until it is within a tolerance.
+Both are pure (no rclpy); the player calls them at every fresh frame of a dwelling step.
+Units: m, T, rad.
+"""
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+from scipy.optimize import lsq_linear
+
+REFERENCE_SAMPLES = 20  # points along the body where tracked and desired are compared
+
+
+@dataclass
+class Gains:
+    """The loop's knobs (a node may change them while it runs)."""
+
+    gain: float = 1.0              # the fraction of the Gauss-Newton step taken, 0..1
+    damping: float = 1e-3          # Tikhonov, relative to the sensitivity's scale
+    max_step_t: float = 0.003      # largest change of a field component per iteration, T
+    tolerance_m: float = 1e-4      # converged: the shape RMS against the reference below this
+    max_iterations: int = 8        # per step: then the step goes on regardless
+    stall_ratio: float = 0.9       # converged too: an iteration that cut the error by less
+    tip_gain: float = 0.5          # eq. 6.10's K_P
+    tip_tolerance_rad: float = math.radians(5.0)
+
+
+@dataclass(frozen=True)
+class Correction:
+    """One iteration's outcome."""
+
+    field_t: np.ndarray     # (3,) the field to hold now, T
+    error_m: float          # the shape RMS (or tip angle error, rad) it corrects
+    converged: bool         # within tolerance (or no iterations left): the step may go on
+    iterations: int         # this step's iterations so far
+
+
+def arc_lengths(points):
+    """Return the cumulative arc length (N,) of a polyline (N, d), m."""
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+
+
+def interpolation_weights(points, s):
+    """Return W (len(s), N): W @ points are the polyline's points at arc lengths s (clipped)."""
+    along = arc_lengths(points)
+    s = np.clip(s, 0.0, along[-1])
+    i = np.clip(np.searchsorted(along, s, side='right') - 1, 0, len(points) - 2)
+    span = along[i + 1] - along[i]
+    t = np.divide(s - along[i], span, out=np.zeros_like(s), where=span > 0)
+    weights = np.zeros((len(s), len(points)))
+    rows = np.arange(len(s))
+    weights[rows, i] = 1.0 - t
+    weights[rows, i + 1] += t
+    return weights
+
+
+def at_arc_lengths(points, s):
+    """Return a polyline's points at arc lengths s (clipped to its length)."""
+    points = np.asarray(points, dtype=float)
+    return interpolation_weights(points, s) @ points
+
+
+def in_limits(field_t, limits):
+    """Return a field (3,) T kept within CoilLimits: each axis clipped, then |B| scaled."""
+    field = np.asarray(field_t, dtype=float).copy()
+    if limits.max_field_t is not None:
+        field = np.clip(field, -limits.max_field_t, limits.max_field_t)
+    norm = np.linalg.norm(field)
+    if limits.max_total_field_t is not None and norm > limits.max_total_field_t:
+        field *= limits.max_total_field_t / norm
+    return field
+
+
+class ShapeController:
+    """Field corrections from the tracked centreline, by the model's shape sensitivity."""
+
+    def __init__(self, model, path, limits, gains=None):
+        """
+        Fix the model (the planned tentacle as planned), the desired path and the limits.
+
+        :param model: a TentacleModel of the planned tentacle
+        :param path: the desired path (tentacle_planner.paths.Path), frame coils
+        :param limits: schedule_check.CoilLimits
+        """
+        self.model, self.path, self.limits = model, path, limits
+        self.gains = gains or Gains()
+        self.iterations, self._last_rms = 0, math.inf
+        self._state, self._inserted = None, None
+
+    def new_step(self):
+        """Count iterations from zero again (a new step begins)."""
+        self.iterations, self._last_rms = 0, math.inf
+
+    def reference(self, inserted_m, s, planned_m=None):
+        """Return the desired (len(s), 2) x, y: the path, or a planned centreline, at s."""
+        if planned_m is not None:
+            return at_arc_lengths(planned_m, s)[:, :2]
+        return self.path.at(np.clip(s, 0.0, self.path.length_m))[:, :2]
+
+    def sensitivity(self, inserted_m, field_t, s):
+        """Return d(x, y at arc lengths s)/dB (2 len(s), 3) of the model's equilibrium."""
+        start = None
+        if self._state is not None:
+            start = self.model.carry(self._state, self._inserted, inserted_m)
+        solution = self.model.solve(inserted_m, field_t, start)
+        if np.all(np.isfinite(solution.state)):
+            self._state, self._inserted = solution.state, inserted_m
+        jacobian = self.model.field_sensitivity(solution, field_t).points   # (n+1, 3, 3)
+        weights = interpolation_weights(solution.points_m, s)
+        return np.einsum('rk,kxp->rxp', weights, jacobian)[:, :2, :].reshape(-1, 3)
+
+    def correct(self, inserted_m, field_t, seen_xy_m, planned_m=None):
+        """
+        Return the Correction for one tracked centreline.
+
+        :param inserted_m: the inserted length now, m
+        :param field_t: (3,) the field held now, T
+        :param seen_xy_m: (N, 2) the tracked centreline, base to tip, coils x and y, m
+        :param planned_m: (k, 3) the step's planned centreline to follow instead of the path
+        """
+        g = self.gains
+        field = np.asarray(field_t, dtype=float)
+        seen = np.asarray(seen_xy_m, dtype=float)
+        if len(seen) < 2 or inserted_m <= 0:
+            return Correction(field, math.nan, True, self.iterations)
+        s = np.linspace(0.0, inserted_m, REFERENCE_SAMPLES)
+        error = at_arc_lengths(seen, s) - self.reference(inserted_m, s, planned_m)
+        rms = float(np.sqrt(np.mean(np.sum(error ** 2, axis=1))))
+        stalled = rms > g.stall_ratio * self._last_rms
+        self._last_rms = min(rms, self._last_rms)
+        if rms <= g.tolerance_m or stalled or self.iterations >= g.max_iterations:
+            return Correction(field, rms, True, self.iterations)
+        self.iterations += 1
+        jacobian = self.sensitivity(inserted_m, field, s)[:, :2]   # Bx, By: the camera's plane
+        scale = np.trace(jacobian.T @ jacobian) / 2 or 1.0
+        low = np.full(2, -g.max_step_t)
+        high = np.full(2, g.max_step_t)
+        if self.limits.max_field_t is not None:
+            low = np.maximum(low, -self.limits.max_field_t - field[:2])
+            high = np.minimum(high, self.limits.max_field_t - field[:2])
+        high = np.maximum(high, low)   # a field already past a limit: only back towards it
+        damped = np.vstack([jacobian, math.sqrt(g.damping * scale) * np.eye(2)])
+        target = np.concatenate([-g.gain * error.ravel(), np.zeros(2)])
+        step = lsq_linear(damped, target, bounds=(low, high + 1e-15)).x
+        corrected = in_limits(field + np.array([step[0], step[1], 0.0]), self.limits)
+        return Correction(corrected, rms, False, self.iterations)
+
+
+def heading_rad(points):
+    """Return the in-plane direction (rad, about z) of a polyline's last segment."""
+    d = np.asarray(points, dtype=float)[-1] - np.asarray(points, dtype=float)[-2]
+    return math.atan2(d[1], d[0])
+
+
+def wrapped(angle_rad):
+    """Return an angle in (-pi, pi]."""
+    return math.atan2(math.sin(angle_rad), math.cos(angle_rad))
+
+
+class TipAngleController:
+    """Thesis eq. 6.10: theta_act(t) = K_P theta_err(t) + theta_act(t - 1), |B| fixed."""
+
+    def __init__(self, path, limits, gains=None):
+        """Fix the desired path (its heading at the tip is the desired tip angle)."""
+        self.path, self.limits = path, limits
+        self.gains = gains or Gains()
+        self.iterations = 0
+
+    def new_step(self):
+        """Count iterations from zero again (a new step begins)."""
+        self.iterations = 0
+
+    def desired_rad(self, inserted_m):
+        """Return the path's heading at an arc length, rad about z."""
+        s = np.clip([inserted_m - 1e-4, inserted_m], 0.0, self.path.length_m)
+        return heading_rad(self.path.at(s))
+
+    def correct(self, inserted_m, field_t, tip_heading_rad):
+        """
+        Return the Correction: the in-plane field turned by K_P times the tip angle error.
+
+        :param tip_heading_rad: the tracked tip's heading, rad about z (/vision/tip)
+        """
+        g = self.gains
+        field = np.asarray(field_t, dtype=float)
+        error = wrapped(self.desired_rad(inserted_m) - tip_heading_rad)
+        if abs(error) <= g.tip_tolerance_rad or self.iterations >= g.max_iterations:
+            return Correction(field, error, True, self.iterations)
+        self.iterations += 1
+        magnitude = math.hypot(field[0], field[1])
+        angle = math.atan2(field[1], field[0]) + g.tip_gain * error
+        turned = np.array([magnitude * math.cos(angle), magnitude * math.sin(angle), field[2]])
+        return Correction(in_limits(turned, self.limits), error, False, self.iterations)

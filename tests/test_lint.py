@@ -70,6 +70,7 @@ def test_topic_names_are_written_once_in_the_contract():
               for f in (contract.axis_target, contract.axis_state)}
     names |= {contract.axis_service(axis, verb).name for axis in contract.AXES
               for verb in ('stop', 'home', 'enable')}
+    names |= {contract.player_service(verb).name for verb in contract.PLAYER_VERBS}
     quoted = [(q + name + q) for name in names for q in '\'"']
     found = [f'{path.relative_to(ROOT)}: {text}' for path in python_files()
              if path.name not in ('contract.py', 'test_contract.py')

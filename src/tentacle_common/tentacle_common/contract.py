@@ -71,6 +71,16 @@ SIM_SHAPE = Topic('/sim/shape', 'nav_msgs/msg/Path', frame_id=COILS_FRAME)
 SIM_MARKERS = Topic('/sim/markers', 'visualization_msgs/msg/MarkerArray')
 SIM_CONTACT = Topic('/sim/contact', 'sensor_msgs/msg/JointState', frame_id=COILS_FRAME)
 PLAYER_PROGRESS = Topic('/player/progress', 'sensor_msgs/msg/JointState')
+PROGRESS_NAMES = ('step', 'steps', 'insertion', 'shape_rms', 'tip_error')  # index, count, m
+# player_node's services (std_srvs/Trigger): start inserts, retract plays backwards
+PLAYER_VERBS = ('start', 'retract', 'pause', 'resume', 'abort')
+
+
+def player_service(verb):
+    """Return /player/<verb> (std_srvs/Trigger): start, retract, pause, resume, abort."""
+    if verb not in PLAYER_VERBS:
+        raise ValueError(f'{verb!r} is not a player service ({", ".join(PLAYER_VERBS)})')
+    return Service(f'/player/{verb}', 'std_srvs/srv/Trigger')
 
 _TOKEN = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')
 

@@ -1,22 +1,459 @@
 """
-Play a field and insertion schedule on the rig: not built yet.
+player_node: play a schedule on the rig, the coils and the stages in step, with a closed loop.
 
-The executable exists so the package installs and the ament index lists it; a later issue
-fills it. Running it says so and exits non-zero rather than pretending to work.
+Services (std_srvs/Trigger): /player/start reads ``schedule`` and plays it from nothing
+inserted; /player/retract plays it backwards to nothing inserted and zero field;
+/player/pause holds the field and the stages where they are; /player/resume plays the
+paused step again; /player/abort commands zero field and stops the stages. A schedule is
+refused, with the reason, when it is of a format this reader does not know, was planned for
+another tentacle than ``tentacle``, or its fields break the coils' limits (the tighter of
+this node's and coils_node's own ``max_field``).
+
+Each step: /inserter/target (and /backbone/target) and /coils/field_cmd, then wait until
+/inserter/state and /coils/field say both have arrived, dwell, go on
+(tentacle_planner.player). The field held is sent again at ``hold_rate`` (coils_node's
+watchdog). ``mode`` closed_loop corrects the field at every fresh /vision/shape while a step
+dwells (tentacle_planner.shape_control), tip_angle by thesis eq. 6.10 on /vision/tip; the
+loop's knobs may be set while a run plays. A fault (the estop, a driver's error in
+/diagnostics, a reading lost, a deadline missed, another node publishing /coils/field_cmd)
+pauses the run and says why (``on_fault`` abort: aborts it). Progress on /player/progress
+and /diagnostics. On exit a run still commanding is aborted: zero field, stages stopped.
 """
 
-import argparse
+from collections import deque
+import math
+import pathlib
 import sys
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import Vector3Stamped
+import numpy as np
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.node import Node
+from rclpy.parameter_client import AsyncParameterClient
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+from std_srvs.srv import Trigger
+from tentacle_common import contract, frames
+from tentacle_common.driver_node import (client, declare_parameters, diagnostic_status,
+                                         publisher, run_node, service, subscription)
+from tentacle_common.errors import ConfigError
+from tentacle_model.model import TentacleModel
+from tentacle_model.tentacle_spec import load_tentacle, SpecError
+from tentacle_planner import paths
+from tentacle_planner.errors import PlanInputError
+from tentacle_planner.player import Phase, play_steps, Player, Seen, Settings
+from tentacle_planner.player_params import (LOOP_PARAMS, MODES, NODE_NAME, PLAYER_PARAMS,
+                                            REFERENCES)
+from tentacle_planner.schedule_check import CoilLimits, field_refusals, tentacle_refusals
+from tentacle_planner.schedule_file import read_schedule
+from tentacle_planner.shape_control import (Gains, in_limits, ShapeController,
+                                            TipAngleController)
+
+TICK_S = 0.02           # the player's clock tick, s
+DRIVER_PREFIXES = ('coils', 'inserter_node')   # /diagnostics statuses a run depends on
+
+
+def _stamp_s(msg):
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+
+
+class LoopFigures:
+    """The closed loop's rate and its latency from a frame's stamp to the field command."""
+
+    def __init__(self):
+        """Keep the recent past only."""
+        self.latency_s = deque(maxlen=2000)
+        self.intervals_s = deque(maxlen=2000)
+        self.corrections, self._last = 0, None
+
+    def evaluated(self, now, step, latency_s, corrected):
+        """Record one frame evaluated at a step (monotonic s), with its latency."""
+        if self._last is not None and self._last[1] == step:
+            self.intervals_s.append(now - self._last[0])
+        self._last = (now, step)
+        if corrected:
+            self.latency_s.append(latency_s)
+            self.corrections += 1
+
+    def values(self):
+        """Return the figures for /diagnostics: rate (Hz), latency median and p95 (ms)."""
+        rate = 1.0 / np.median(self.intervals_s) if self.intervals_s else math.nan
+        lat = np.percentile(self.latency_s, [50, 95]) * 1e3 if self.latency_s else [math.nan] * 2
+        return {'loop_corrections': self.corrections, 'loop_rate_hz': f'{rate:.1f}',
+                'loop_latency_ms_median': f'{lat[0]:.1f}', 'loop_latency_ms_p95': f'{lat[1]:.1f}'}
+
+
+class PlayerNode(Node):
+    """The schedule player's ROS side: services in, commands out, the loop on frames."""
+
+    def __init__(self):
+        """Declare parameters, wire topics and services, start the clock."""
+        super().__init__(NODE_NAME)
+        self.p = declare_parameters(self, PLAYER_PARAMS)
+        self.loop = declare_parameters(self, LOOP_PARAMS, read_only=False)
+        for name, allowed in (('mode', MODES), ('reference', REFERENCES),
+                              ('on_fault', ('pause', 'abort'))):
+            value = self.loop.get(name, self.p.get(name))
+            if value not in allowed:
+                raise ConfigError(f'{name}: {value!r} is not one of {", ".join(allowed)}')
+        self.rig_tentacle = None
+        if self.p['tentacle']:
+            try:
+                self.rig_tentacle = load_tentacle(self.p['tentacle'])
+            except SpecError as exc:
+                raise ConfigError(f'tentacle: {exc}') from None
+        self.add_on_set_parameters_callback(self._on_set)
+        self.seen, self.driver_status = Seen(), {}
+        self.player = self.schedule = self.controller = self.tip_control = None
+        self.path = self.insertion_point = None
+        self.coils_max_field = None
+        self._published_field, self._published_at, self._step_key = None, -math.inf, None
+        self._frame_after_ros, self._last_loop = 0.0, -math.inf
+        self._loop_converged, self._shape_at = False, -math.inf
+        self._latest_shape, self._abort_pending, self._others = None, False, []
+        self._phase = None
+        self.figures = LoopFigures()
+
+        self.field_pub = publisher(self, contract.FIELD_CMD)
+        self.target_pubs = {axis: publisher(self, contract.axis_target(axis))
+                            for axis in contract.AXES}
+        self.stop_clients = {axis: client(self, contract.axis_service(axis, 'stop'))
+                             for axis in contract.AXES}
+        self.progress_pub = publisher(self, contract.PLAYER_PROGRESS)
+        self.diag_pub = publisher(self, contract.DIAGNOSTICS)
+        subscription(self, contract.FIELD, self.on_field)
+        for axis in contract.AXES:
+            subscription(self, contract.axis_state(axis),
+                         lambda msg, a=axis: self.on_state(a, msg))
+        subscription(self, contract.ESTOP, self.on_estop)
+        subscription(self, contract.DIAGNOSTICS, self.on_diagnostics)
+        subscription(self, contract.VISION_SHAPE, self.on_shape)
+        subscription(self, contract.VISION_TIP, self.on_tip)
+        for verb in contract.PLAYER_VERBS:
+            service(self, contract.player_service(verb),
+                    lambda req, res, v=verb: self.on_service(v, res))
+        self.coils_params = AsyncParameterClient(self, self.p['coils_node'])
+        self.create_timer(TICK_S, self.tick)
+        self.create_timer(1.0 / self.p['progress_rate'], self.publish_progress)
+        self.create_timer(1.0, self.housekeeping)
+        if self.rig_tentacle is None:
+            self.get_logger().warning('tentacle: not given: a schedule planned for another '
+                                      'tentacle is not refused')
+
+    # -- parameters --------------------------------------------------------------------
+    def _on_set(self, parameters):
+        changes = {}
+        for parameter in parameters:
+            if parameter.name in ('mode', 'reference'):
+                allowed = MODES if parameter.name == 'mode' else REFERENCES
+                if parameter.value not in allowed:
+                    return SetParametersResult(successful=False, reason=(
+                        f'{parameter.name}: {parameter.value!r} is not one of '
+                        f'{", ".join(allowed)}'))
+            if parameter.name in self.loop:
+                changes[parameter.name] = parameter.value
+        self.loop.update(changes)
+        self._apply_gains()
+        return SetParametersResult(successful=True)
+
+    def gains(self):
+        """Return the loop's Gains from the parameters now."""
+        q = self.loop
+        return Gains(gain=q['gain'], damping=q['damping'], max_step_t=q['max_step'],
+                     tolerance_m=q['tolerance'], max_iterations=q['max_iterations'],
+                     stall_ratio=q['stall_ratio'], tip_gain=q['tip_gain'],
+                     tip_tolerance_rad=q['tip_tolerance'])
+
+    def _apply_gains(self):
+        for controller in (self.controller, self.tip_control):
+            if controller is not None:
+                controller.gains = self.gains()
+
+    # -- what the rig says -------------------------------------------------------------
+    def on_field(self, msg):
+        """Keep the field read back, T."""
+        self.seen.field_t = np.array([msg.vector.x, msg.vector.y, msg.vector.z])
+        self.seen.field_at = time.monotonic()
+
+    def on_state(self, axis, msg):
+        """Keep a stage's position, m, and velocity, m/s."""
+        if msg.position:
+            self.seen.positions_m[axis] = float(msg.position[0])
+            self.seen.velocities_m_s[axis] = float(msg.velocity[0]) if msg.velocity else 0.0
+            self.seen.positions_at[axis] = time.monotonic()
+
+    def on_estop(self, msg):
+        """Keep the estop's state."""
+        self.seen.estop = bool(msg.data)
+
+    def on_diagnostics(self, msg):
+        """Keep the drivers' statuses: an error is a fault of the run."""
+        for status in msg.status:
+            if status.name.startswith(DRIVER_PREFIXES):
+                self.driver_status[status.name] = (status.level, status.message)
+
+    def faults(self):
+        """Return the faults of the rig now, in words."""
+        found = [f'{name}: {message}' for name, (level, message) in self.driver_status.items()
+                 if level == 2]
+        if self._others:
+            found.append(f'another node publishes {contract.FIELD_CMD.name}: '
+                         + ', '.join(self._others))
+        late = time.monotonic() - self._shape_at
+        if self.loop['mode'] != 'open_loop' and self.player is not None \
+                and self.player.phase is Phase.DWELL and late > self.p['feedback_timeout_s']:
+            found.append(f'{self.loop["mode"]}: no {contract.VISION_SHAPE.name} for '
+                         f'{min(late, 1e6):.1f} s (is tracker_node running?)')
+        return tuple(found)
+
+    # -- the run -----------------------------------------------------------------------
+    def limits(self):
+        """Return the tighter of this node's limits and coils_node's own max_field."""
+        own = CoilLimits(self.p['max_field'], self.p['max_total_field'],
+                         self.p['max_field_change'])
+        return own.tightest(CoilLimits(self.coils_max_field))
+
+    def load(self, retract):
+        """Return a new Player for the schedule file, or raise ValueError saying why not."""
+        if self.coils_max_field is None:
+            raise ValueError(f'the limits of {self.p["coils_node"]} are not known: is it '
+                             'running? (its max_field is asked for every second)')
+        if not self.loop['schedule']:
+            raise ValueError('schedule: no schedule file given (-p schedule:=DIR/schedule.yaml)')
+        try:
+            schedule = read_schedule(self.loop['schedule'])
+            planned = schedule.tentacle_spec()
+        except PlanInputError as exc:
+            raise ValueError(f'refused: {exc}') from None
+        reasons = []
+        if self.rig_tentacle is not None:
+            reasons += [f'planned for another tentacle than {self.p["tentacle"]}: {r}'
+                        for r in tentacle_refusals(planned, self.rig_tentacle)]
+        limits = self.limits()
+        reasons += field_refusals([s.field_t for s in schedule.steps], limits)
+        if schedule.interrupted:
+            reasons.append('the plan was interrupted (Ctrl-C): plan it again to play it')
+        if reasons:
+            raise ValueError(f'refused {schedule.source}: ' + '; '.join(reasons))
+        axes = ('inserter', 'backbone') if self.p['backbone'] else ('inserter',)
+        start, steps = play_steps(schedule, axes, self.p['insertion_offset_m'], retract)
+        q = self.p
+        settings = Settings(
+            dwell_s=q['dwell_s'], position_tolerance_m=q['position_tolerance'],
+            field_tolerance_t=q['field_tolerance'], settle_timeout_s=q['settle_timeout_s'],
+            speed_m_s=q['stage_speed'], feedback_timeout_s=q['feedback_timeout_s'],
+            abort_on_fault=q['on_fault'] == 'abort')
+        self.schedule, self.path = schedule, paths.Path(schedule.path_m, str(schedule.source))
+        self.insertion_point = planned.base_position_m
+        model = TentacleModel(planned, **schedule.model.as_options())
+        self.controller = ShapeController(model, self.path, limits, self.gains())
+        self.tip_control = TipAngleController(self.path, limits, self.gains())
+        return Player(start, steps, settings, lambda b: in_limits(b, limits))
+
+    def on_service(self, verb, response):
+        """Answer /player/<verb>."""
+        now = time.monotonic()
+        try:
+            if verb in ('start', 'retract'):
+                if self.player is not None and self.player.phase in (
+                        Phase.MOVING, Phase.DWELL, Phase.PAUSED):
+                    raise ValueError(f'a run is {self.player.phase.value}: abort it first')
+                player = self.load(retract=verb == 'retract')
+                self.seen.faults = self.faults()
+                command = player.start(now, self.seen)
+                self.player, self._abort_pending = player, False
+                self.figures = LoopFigures()
+                command.said[0] += (f' ({"retracting" if verb == "retract" else "inserting"}'
+                                    f' {self.schedule.source}, {self.loop["mode"]})')
+            elif self.player is None:
+                raise ValueError('no run: call /player/start first')
+            elif verb == 'pause':
+                command = self.player.pause(now)
+            elif verb == 'resume':
+                self.seen.faults = self.faults()
+                command = self.player.resume(now, self.seen)
+            else:
+                command = self.player.abort(now)
+                self._abort_pending = True
+        except ValueError as exc:
+            response.success, response.message = False, str(exc)
+            self.get_logger().warning(f'/player/{verb}: {exc}')
+            return response
+        self.apply(command)
+        response.success, response.message = True, '; '.join(command.said) or verb
+        return response
+
+    def tick(self):
+        """Advance the run and send what it holds."""
+        if self.player is None:
+            return
+        self.seen.faults = self.faults()
+        busy = self.loop['mode'] != 'open_loop' and not self._loop_converged
+        self.apply(self.player.update(time.monotonic(), self.seen, busy))
+        if self.player.phase is not self._phase:
+            self._phase = self.player.phase
+            if self._phase is Phase.DWELL:   # frames before this may show the stage moving
+                self._frame_after_ros = max(self._frame_after_ros,
+                                            self.get_clock().now().nanoseconds * 1e-9)
+        if self._abort_pending and self.seen.field_t is not None and \
+                np.abs(self.seen.field_t).max() <= self.p['field_tolerance']:
+            self._abort_pending = False
+            self.get_logger().info('aborted: the field reads zero ('
+                                   f'{np.abs(self.seen.field_t).max() * 1e3:.3f} mT), stages '
+                                   'stopped')
+
+    def apply(self, command):
+        """Send a Command: the targets, the field (on change and at hold_rate), stops."""
+        now = time.monotonic()
+        for line in command.said:
+            self.get_logger().info(line)
+        for axis, target in command.targets_m.items():
+            self.target_pubs[axis].publish(Float64(data=float(target)))
+        if command.stop_axes:
+            for axis in self.seen.positions_m:
+                if axis in self.stop_clients and self.stop_clients[axis].service_is_ready():
+                    self.stop_clients[axis].call_async(Trigger.Request())
+        if command.field_t is not None and (
+                self._published_field is None
+                or not np.array_equal(command.field_t, self._published_field)
+                or now - self._published_at >= 1.0 / self.p['hold_rate']):
+            self.publish_field(command.field_t, now)
+        key = (id(self.player), self.player.index) if self.player else None
+        if key != self._step_key:
+            self._step_key = key
+            for controller in (self.controller, self.tip_control):
+                if controller is not None:
+                    controller.new_step()
+            self._loop_converged = False
+            self.publish_progress()
+
+    def publish_field(self, field_t, now):
+        """Publish /coils/field_cmd, T, frame coils."""
+        msg = Vector3Stamped()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.frame_id = contract.COILS_FRAME
+        msg.vector.x, msg.vector.y, msg.vector.z = (float(v) for v in field_t)
+        if self._published_field is None or not np.array_equal(field_t, self._published_field):
+            self._frame_after_ros = _stamp_s(msg) + self.loop['loop_settle_s']
+        self.field_pub.publish(msg)
+        self._published_field, self._published_at = np.array(field_t, dtype=float), now
+
+    # -- the closed loop ----------------------------------------------------------------
+    def _fresh(self, msg):
+        """Return whether a tracker message may drive a correction now."""
+        self._shape_at = time.monotonic()
+        if self.loop['mode'] == 'open_loop' or self.player is None or \
+                self.player.phase is not Phase.DWELL or self._loop_converged:
+            return False
+        if _stamp_s(msg) < self._frame_after_ros:   # taken before the last command settled
+            return False
+        return time.monotonic() - self._last_loop >= 1.0 / self.loop['loop_rate']
+
+    def on_shape(self, msg):
+        """Keep the tracked centreline; in closed_loop, correct the field from it."""
+        points = np.array([[p.pose.position.x, p.pose.position.y] for p in msg.poses])
+        self._latest_shape = points
+        if self.loop['mode'] != 'closed_loop' or not self._fresh(msg):
+            return
+        planned = None
+        if self.loop['reference'] == 'planned' and self.player.step.index > 0:
+            planned = self.schedule.steps[self.player.step.index - 1].predicted_centreline_m
+        seen = frames.coils_from_workspace(points, self.insertion_point)[:, :2] \
+            if len(points) else points
+        correction = self.controller.correct(self.player.step.inserted_m, self.player.field_t,
+                                             seen, planned)
+        self._corrected(msg, correction)
+
+    def on_tip(self, msg):
+        """In tip_angle mode, correct the field from the tracked tip's heading."""
+        if self.loop['mode'] != 'tip_angle' or not self._fresh(msg):
+            return
+        q = msg.pose.orientation
+        heading = 2.0 * math.atan2(q.z, q.w)
+        correction = self.tip_control.correct(self.player.step.inserted_m, self.player.field_t,
+                                              heading)
+        self._corrected(msg, correction)
+
+    def _corrected(self, msg, correction):
+        now = time.monotonic()
+        self._last_loop = now
+        self._loop_converged = correction.converged
+        latency = self.get_clock().now().nanoseconds * 1e-9 - _stamp_s(msg)
+        if not correction.converged:
+            self.apply(self.player.adjust_field(correction.field_t))
+        self.figures.evaluated(now, self.player.index, latency, not correction.converged)
+
+    # -- reports ------------------------------------------------------------------------
+    def tracked_errors(self):
+        """Return (shape RMS, tip error), m, of the latest tracked shape, or NaN."""
+        if self.player is None or self._latest_shape is None or len(self._latest_shape) < 2:
+            return math.nan, math.nan
+        inserted = self.player.step.inserted_m
+        if inserted <= 0:
+            return math.nan, math.nan
+        points = frames.coils_from_workspace(self._latest_shape, self.insertion_point)
+        try:
+            return paths.shape_error(points, self.path, min(inserted, self.path.length_m))
+        except PlanInputError:
+            return math.nan, math.nan
+
+    def publish_progress(self):
+        """Publish /player/progress and the player's /diagnostics status."""
+        if self.player is None:
+            return
+        step, count = self.player.step, len(self.schedule.steps)
+        shape_rms, tip_error = self.tracked_errors()
+        msg = JointState(name=list(contract.PROGRESS_NAMES),
+                         position=[float(step.index), float(count), float(step.inserted_m),
+                                   float(shape_rms), float(tip_error)])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.progress_pub.publish(msg)
+        phase = self.player.phase
+        level = 'ok' if phase not in (Phase.PAUSED, Phase.ABORTED) else \
+            ('warn' if self.player.reason == 'asked to' else 'error')
+        values = {'phase': phase.value, 'step': step.index, 'steps': count,
+                  'inserted_mm': f'{step.inserted_m * 1e3:.3f}', 'mode': self.loop['mode'],
+                  'schedule': str(self.schedule.source), **self.figures.values()}
+        diag = DiagnosticArray(status=[diagnostic_status(
+            f'{NODE_NAME}: run', str(pathlib.Path(self.schedule.source).name), level,
+            f'{phase.value}' + (f': {self.player.reason}' if self.player.reason else ''),
+            values)])
+        diag.header.stamp = msg.header.stamp
+        self.diag_pub.publish(diag)
+
+    def housekeeping(self):
+        """Ask coils_node for its limits; look for other publishers of /coils/field_cmd."""
+        if self.coils_params.services_are_ready():
+            future = self.coils_params.get_parameters(['max_field'])
+            future.add_done_callback(self._got_coils_limits)
+        mine = self.get_fully_qualified_name()
+        self._others = sorted({f'{i.node_namespace.rstrip("/")}/{i.node_name}'
+                               for i in self.get_publishers_info_by_topic(
+                                   contract.FIELD_CMD.name)} - {mine})
+
+    def _got_coils_limits(self, future):
+        try:
+            values = future.result().values
+        except Exception:   # noqa: BLE001 - coils_node went away: keep the last known
+            return
+        if values and values[0].type == 3:   # PARAMETER_DOUBLE
+            self.coils_max_field = values[0].double_value
+
+    def shutdown(self):
+        """Abort a run that still commands the rig; return the line said at exit."""
+        if self.player is None or self.player.phase in (Phase.IDLE, Phase.ABORTED):
+            return 'no run commanding the rig'
+        self.apply(self.player.abort(time.monotonic(), 'the player is stopping'))
+        return 'run aborted: zero field commanded, stages stopped'
 
 
 def main(args=None):
-    """Parse the command line (``--help`` works) and refuse to run."""
-    parser = argparse.ArgumentParser(
-        prog='player_node',
-        description='Play a field and insertion schedule on the rig.'
-                    ' Not implemented yet.')
-    parser.parse_known_args(args)
-    sys.exit('player_node: not implemented yet (a later issue builds it)')
+    """Run the node; on exit a run still commanding is aborted."""
+    argv = sys.argv[1:] if args is None else args
+    run_node(argv, NODE_NAME, PLAYER_PARAMS + LOOP_PARAMS, __doc__, PlayerNode,
+             PlayerNode.shutdown)
 
 
 if __name__ == '__main__':

@@ -21,7 +21,9 @@ import time
 from tentacle_common.contract import axis_node_name
 from tentacle_sim.sim_rig import NodeProcess
 
-STOP_ORDER = ('driver', 'watcher', 'sim')   # what stops first
+# What stops first: the player (it stops commanding), the drivers (each confirming its safe
+# state), the watchers, the recorder (it has recorded the stop), the simulator.
+STOP_ORDER = ('commander', 'driver', 'watcher', 'recorder', 'sim')
 CONFIRMED = {'coils_node': 'outputs zero and off', 'inserter_node': 'axis stopped',
              'backbone_node': 'axis stopped'}   # the line a driver ends with when safe
 DRIVER_STOP_S = 40.0   # a ramp to zero at the slowest slew, and its read-back
@@ -51,7 +53,8 @@ def scene_has_backbone(scene_file):
     return load_scene(scene_file).tentacle.backbone is not None
 
 
-def sim_table(scene_file, root, device_dir=None, tracker=True, **sim_params):
+def sim_table(scene_file, root, device_dir=None, tracker=True, schedule=None, player=None,
+              **sim_params):
     """
     Return the simulated rig's entries: sim_node and the drivers on config/sim/*.yaml.
 
@@ -60,9 +63,14 @@ def sim_table(scene_file, root, device_dir=None, tracker=True, **sim_params):
     :param device_dir: sim_node's device folder (default config/sim's, /tmp/tentacle_sim);
         the drivers' ports follow it
     :param tracker: run tracker_node on the simulated camera
+    :param schedule: a schedule file: sim_node's tentacle is the one made to its plan, and
+        player_node runs to play it
+    :param player: more player_node parameters (e.g. {'mode': 'closed_loop'})
     :param sim_params: more sim_node parameters (e.g. camera_rate)
     """
     sim_dir = pathlib.Path(root) / 'config' / 'sim'
+    if schedule is not None:
+        sim_params['schedule'] = str(schedule)
     ports = {}
     if device_dir is not None:
         sim_params['device_dir'] = str(device_dir)
@@ -86,6 +94,10 @@ def sim_table(scene_file, root, device_dir=None, tracker=True, **sim_params):
                            _ros_args(sim_dir / 'tracker.yaml', **_camera_of(sim_params),
                                      **ports.get('tracker', {})),
                            'watcher'))
+    if schedule is not None:
+        table.append(Entry('player_node', 'tentacle_planner.player_node',
+                           _ros_args(sim_dir / 'player.yaml', schedule=schedule,
+                                     **(player or {})), 'commander'))
     return table
 
 

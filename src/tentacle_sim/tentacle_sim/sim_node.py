@@ -23,6 +23,7 @@ a line, as the emulators take on stdin; ``sim_devices.ask`` sends one). On exit 
 stop and their links go: stop the drivers first.
 """
 
+import dataclasses
 import sys
 import threading
 import time
@@ -40,6 +41,7 @@ from tentacle_common.driver_node import (declare_parameters, diagnostic_status, 
 from tentacle_common.errors import ConfigError
 from tentacle_planner.errors import PlanInputError
 from tentacle_planner.scene import load_scene
+from tentacle_planner.schedule_file import read_schedule
 from tentacle_sim.camera import SimCamera
 from tentacle_sim.params import NODE_NAME, SIM_PARAMS
 from tentacle_sim.rate import RateMeter
@@ -71,6 +73,12 @@ class SimNode(Node):
             self.scene = load_scene(p['scene'])
         except PlanInputError as exc:
             raise ConfigError(f'scene: {exc}') from None
+        if p['schedule']:   # the tentacle as made to this plan: its planned magnetisation
+            try:
+                planned = read_schedule(p['schedule']).tentacle_spec()
+            except PlanInputError as exc:
+                raise ConfigError(f'schedule: {exc}') from None
+            self.scene = dataclasses.replace(self.scene, tentacle=planned)
         if len(p['actuation_matrix']) != 9:
             raise ConfigError('actuation_matrix: give 9 numbers (3 x 3, row-major), T/A')
         self.period_s = 1.0 / p['camera_rate']

@@ -1,0 +1,339 @@
+"""
+RigCommander: the rig from a lab script, in the manner of nav2_simple_commander.
+
+    from tentacle_rig.commander_node import RigCommander
+    with RigCommander() as rig:
+        rig.wait_for_rig()
+        rig.home('inserter')
+        rig.set_field([0.0, 0.010, 0.0])          # held until release_field()
+        rig.move_axis('inserter', 0.020)
+        rig.play('out/schedule.yaml', mode='closed_loop', on_progress=print)
+
+RigCommander is itself a node, spun on a thread of its own in a private context (a script
+may hold several). Every call that waits has a deadline and returns a ``Result``: its
+``outcome`` (an ``Outcome``) and a message, true only when DONE; nothing raises for a rig
+that refuses or does not answer. A field set is held (sent again at 5 Hz: coils_node's
+watchdog ramps an unrenewed field to zero after watchdog_s) until ``release_field`` or
+``close``. Units: tesla, metre, second.
+"""
+
+from dataclasses import dataclass
+import enum
+import math
+import threading
+import time
+
+from geometry_msgs.msg import Vector3Stamped
+import numpy as np
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
+from std_msgs.msg import Bool, Float64
+from std_srvs.srv import SetBool, Trigger
+from tentacle_common import contract
+from tentacle_common.driver_node import client, publisher, subscription
+
+HOLD_PERIOD_S = 0.2     # a held field is sent again this often
+POLL_S = 0.01
+
+
+class Outcome(enum.Enum):
+    """How a call ended."""
+
+    DONE = 'done'            # it happened, read back
+    REFUSED = 'refused'      # the rig said no (the message says why)
+    TIMED_OUT = 'timed out'  # no answer, or not there, by the deadline
+    PAUSED = 'paused'        # a run paused (asked, or a fault: the message says which)
+    ABORTED = 'aborted'      # a run aborted
+
+
+@dataclass(frozen=True)
+class Result:
+    """An Outcome and what was said."""
+
+    outcome: Outcome
+    message: str = ''
+
+    def __bool__(self):
+        """Return True when the call did what it was asked."""
+        return self.outcome is Outcome.DONE
+
+
+@dataclass(frozen=True)
+class Progress:
+    """/player/progress: the step (1-based; 0 the end of a retraction) and the errors, m."""
+
+    step: int
+    steps: int
+    inserted_m: float
+    shape_rms_m: float
+    tip_error_m: float
+
+
+class RigCommander(Node):
+    """The rig's topics and services behind a few calls with deadlines."""
+
+    def __init__(self, name='rig_commander', axes=contract.AXES):
+        """Start a private context, the node and its spin thread."""
+        self._context = Context()
+        rclpy.init(context=self._context)
+        super().__init__(name, context=self._context)
+        self._lock = threading.Lock()
+        self._latest = {}
+        self._held = None
+        self.field_pub = None   # made by set_field: the player pauses while another commands
+        self.estop_pub = publisher(self, contract.ESTOP)
+        self.target_pubs = {a: publisher(self, contract.axis_target(a)) for a in axes}
+        subscription(self, contract.FIELD, lambda m: self._keep('field', m))
+        subscription(self, contract.PLAYER_PROGRESS, lambda m: self._keep('progress', m))
+        subscription(self, contract.DIAGNOSTICS, self._on_diagnostics)
+        for axis in axes:
+            subscription(self, contract.axis_state(axis),
+                         lambda m, a=axis: self._keep(f'state:{a}', m))
+        self.player_params = AsyncParameterClient(self, 'player_node')
+        self._executor = SingleThreadedExecutor(context=self._context)
+        self._executor.add_node(self)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+
+    # -- plumbing ---------------------------------------------------------------------------
+    def _spin(self):
+        next_hold = time.monotonic()
+        while not self._stop.is_set():
+            self._executor.spin_once(timeout_sec=0.05)
+            held = self._held
+            if held is not None and time.monotonic() >= next_hold:
+                next_hold = time.monotonic() + HOLD_PERIOD_S
+                self._publish_field(held)
+
+    def _keep(self, key, msg):
+        with self._lock:
+            self._latest[key] = (time.monotonic(), msg)
+
+    def _on_diagnostics(self, msg):
+        for status in msg.status:
+            if status.name == 'player_node: run':
+                self._keep('player', status)
+
+    def latest(self, key, since=-math.inf):
+        """Return the newest message of a kind ('field', 'progress', 'state:<axis>', 'player')
+        received after a monotonic time, or None."""
+        with self._lock:
+            got = self._latest.get(key)
+        return got[1] if got is not None and got[0] >= since else None
+
+    @staticmethod
+    def _wait(condition, timeout_s):
+        """Return condition()'s value once true, or its last value at the deadline."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            value = condition()
+            if value or time.monotonic() >= deadline:
+                return value
+            time.sleep(POLL_S)
+
+    def _call(self, srv, request, timeout_s):
+        handle = client(self, srv)
+        try:
+            if not handle.wait_for_service(timeout_sec=timeout_s):
+                return Result(Outcome.TIMED_OUT, f'no {srv.name} in {timeout_s:g} s')
+            future = handle.call_async(request)
+            if not self._wait(future.done, timeout_s):
+                return Result(Outcome.TIMED_OUT, f'{srv.name}: no answer in {timeout_s:g} s')
+            answer = future.result()
+            return Result(Outcome.DONE if answer.success else Outcome.REFUSED, answer.message)
+        finally:
+            self.destroy_client(handle)
+
+    # -- the rig ----------------------------------------------------------------------------
+    def wait_for_rig(self, timeout_s=30.0, needs=('field', 'state:inserter')):
+        """Wait until the rig's readings arrive (default: the field and the inserter)."""
+        def missing():
+            return [k for k in needs if self.latest(k) is None]
+        if self._wait(lambda: not missing(), timeout_s):
+            return Result(Outcome.DONE, 'the rig is up')
+        return Result(Outcome.TIMED_OUT, f'nothing from {", ".join(missing())} in '
+                      f'{timeout_s:g} s: is the rig up?')
+
+    def field_t(self):
+        """Return the field read back (3,), T, or None."""
+        msg = self.latest('field')
+        return None if msg is None else np.array([msg.vector.x, msg.vector.y, msg.vector.z])
+
+    def _publish_field(self, field_t):
+        with self._lock:
+            pub = self.field_pub
+        if pub is None:
+            return
+        msg = Vector3Stamped()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.frame_id = contract.COILS_FRAME
+        msg.vector.x, msg.vector.y, msg.vector.z = (float(v) for v in field_t)
+        pub.publish(msg)
+
+    def set_field(self, field_t, timeout_s=5.0, tolerance_t=2e-4):
+        """Command and hold a field, T (frame coils); wait until it reads back within tolerance."""
+        field = np.asarray(field_t, dtype=float)
+        if field.shape != (3,) or not np.all(np.isfinite(field)):
+            return Result(Outcome.REFUSED, f'field {field_t!r}: three finite numbers, tesla')
+        if self.field_pub is None:
+            self.field_pub = publisher(self, contract.FIELD_CMD)
+        if not self._wait(lambda: self.field_pub.get_subscription_count() > 0, timeout_s):
+            return Result(Outcome.TIMED_OUT, f'no subscriber to {contract.FIELD_CMD.name}')
+        since = time.monotonic()
+        self._held = field
+        self._publish_field(field)
+
+        def there():
+            msg = self.latest('field', since)
+            return msg is not None and np.abs(self.field_t() - field).max() <= tolerance_t
+        if self._wait(there, timeout_s):
+            return Result(Outcome.DONE, f'the field reads {self.field_t() * 1e3} mT')
+        return Result(Outcome.TIMED_OUT, f'the field reads {self.field_t()} T, not {field} T, '
+                      f'after {timeout_s:g} s (coils_node logs a refusal)')
+
+    def release_field(self):
+        """Stop holding the field (coils_node ramps it to zero after its watchdog_s) and stop
+        publishing field commands (a player may then play)."""
+        self._held = None
+        with self._lock:
+            pub, self.field_pub = self.field_pub, None
+        if pub is not None:
+            self.destroy_publisher(pub)
+
+    def move_axis(self, axis, position_m, timeout_s=30.0, tolerance_m=2e-5):
+        """Send a stage to a position, m; wait until it stands there."""
+        if axis not in self.target_pubs:
+            return Result(Outcome.REFUSED, f'{axis!r} is not one of {", ".join(self.target_pubs)}')
+        pub = self.target_pubs[axis]
+        if not self._wait(lambda: pub.get_subscription_count() > 0, min(timeout_s, 10.0)):
+            return Result(Outcome.TIMED_OUT, f'no {axis} node subscribes to its target')
+        since = time.monotonic()
+        pub.publish(Float64(data=float(position_m)))
+
+        def there():
+            msg = self.latest(f'state:{axis}', since)
+            return msg is not None and abs(msg.position[0] - position_m) <= tolerance_m and \
+                abs(msg.velocity[0]) < 1e-4
+        if self._wait(there, timeout_s):
+            return Result(Outcome.DONE, f'{axis} at {position_m * 1e3:.3f} mm')
+        msg = self.latest(f'state:{axis}')
+        where = f'{msg.position[0] * 1e3:.3f} mm' if msg is not None else 'unknown'
+        return Result(Outcome.TIMED_OUT, f'{axis} at {where}, not {position_m * 1e3:.3f} mm, '
+                      f'after {timeout_s:g} s (inserter_node logs a refusal)')
+
+    def home(self, axis='inserter', timeout_s=30.0):
+        """Make where a stage stands its zero."""
+        return self._call(contract.axis_service(axis, 'home'), Trigger.Request(), timeout_s)
+
+    def stop_axis(self, axis='inserter', timeout_s=10.0):
+        """Stop a stage now."""
+        return self._call(contract.axis_service(axis, 'stop'), Trigger.Request(), timeout_s)
+
+    def enable_coils(self, on=True, timeout_s=10.0):
+        """Energise (True) or de-energise the coils' outputs."""
+        return self._call(contract.COILS_ENABLE, SetBool.Request(data=bool(on)), timeout_s)
+
+    def estop(self, on, timeout_s=5.0):
+        """Publish the estop (latched); wait until the rig subscribes first."""
+        if not self._wait(lambda: self.estop_pub.get_subscription_count() > 0, timeout_s):
+            return Result(Outcome.TIMED_OUT, f'no subscriber to {contract.ESTOP.name}')
+        self.estop_pub.publish(Bool(data=bool(on)))
+        return Result(Outcome.DONE, f'estop {"on" if on else "off"}')
+
+    def capture_background(self, timeout_s=20.0):
+        """Have the tracker take its next frame as the empty scene (nothing inserted)."""
+        return self._call(contract.VISION_CAPTURE_BACKGROUND, Trigger.Request(), timeout_s)
+
+    # -- the player -------------------------------------------------------------------------
+    def set_player(self, timeout_s=10.0, **values):
+        """Set player_node parameters (schedule, mode, gains, ...); DONE when all were taken."""
+        if not self.player_params.wait_for_services(timeout_sec=timeout_s):
+            return Result(Outcome.TIMED_OUT, 'player_node has no parameter services: is it up?')
+        future = self.player_params.set_parameters(
+            [Parameter(name, value=value) for name, value in values.items()])
+        if not self._wait(future.done, timeout_s):
+            return Result(Outcome.TIMED_OUT, 'player_node did not answer the parameters')
+        refused = [f'{name}: {r.reason}' for name, r in zip(values, future.result().results)
+                   if not r.successful]
+        return Result(Outcome.REFUSED, '; '.join(refused)) if refused else \
+            Result(Outcome.DONE, 'set')
+
+    def player(self, verb, timeout_s=10.0):
+        """Call /player/<verb>: start, retract, pause, resume or abort."""
+        return self._call(contract.player_service(verb), Trigger.Request(), timeout_s)
+
+    def progress(self):
+        """Return the latest Progress, or None."""
+        msg = self.latest('progress')
+        if msg is None:
+            return None
+        values = dict(zip(msg.name, msg.position))
+        return Progress(int(values['step']), int(values['steps']), values['insertion'],
+                        values['shape_rms'], values['tip_error'])
+
+    def run_state(self, since=-math.inf):
+        """Return (phase, message) of the player's latest status, or None."""
+        status = self.latest('player', since)
+        if status is None:
+            return None
+        return {v.key: v.value for v in status.values}.get('phase', ''), status.message
+
+    def wait_for_run(self, timeout_s=600.0, on_progress=None, since=None):
+        """
+        Wait until the run is done, paused or aborted; return the Result.
+
+        :param on_progress: called with each new Progress
+        :param since: only statuses received after this monotonic time count (default now)
+        """
+        since = time.monotonic() if since is None else since
+        deadline, last = time.monotonic() + timeout_s, None
+        while True:
+            progress = self.progress()
+            if on_progress is not None and progress is not None and progress != last:
+                on_progress(progress)
+                last = progress
+            state = self.run_state(since)
+            if state is not None and state[0] in ('done', 'paused', 'aborted'):
+                outcome = {'done': Outcome.DONE, 'paused': Outcome.PAUSED,
+                           'aborted': Outcome.ABORTED}[state[0]]
+                return Result(outcome, state[1])
+            if time.monotonic() >= deadline:
+                return Result(Outcome.TIMED_OUT, f'the run is still {state and state[0]} '
+                              f'after {timeout_s:g} s')
+            time.sleep(0.02)
+
+    def play(self, schedule=None, retract=False, timeout_s=600.0, on_progress=None,
+             **player_params):
+        """Set the schedule (and any player parameters), start, wait; return the Result."""
+        values = dict(player_params, **({'schedule': str(schedule)} if schedule else {}))
+        if values:
+            result = self.set_player(**values)
+            if not result:
+                return result
+        result = self.player('retract' if retract else 'start')
+        if not result:
+            return result
+        return self.wait_for_run(timeout_s, on_progress, since=time.monotonic())
+
+    # -- the end ----------------------------------------------------------------------------
+    def close(self):
+        """Stop holding, stop spinning, end the context."""
+        self._held = None
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+        self._executor.shutdown()
+        self.destroy_node()
+        rclpy.try_shutdown(context=self._context)
+
+    def __enter__(self):
+        """Use as a context manager: closed at the end."""
+        return self
+
+    def __exit__(self, *exc):
+        """Close."""
+        self.close()

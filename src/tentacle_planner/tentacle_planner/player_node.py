@@ -48,8 +48,8 @@ from tentacle_planner.player_params import (LOOP_PARAMS, MODES, NODE_NAME, PLAYE
                                             REFERENCES)
 from tentacle_planner.schedule_check import CoilLimits, field_refusals, tentacle_refusals
 from tentacle_planner.schedule_file import read_schedule
-from tentacle_planner.shape_control import (Gains, in_limits, ShapeController,
-                                            TipAngleController)
+from tentacle_planner.shape_control import (Gains, in_limits, REFERENCE_SAMPLES,
+                                            ShapeController, TipAngleController, tracked_at)
 
 TICK_S = 0.02           # the player's clock tick, s
 DRIVER_PREFIXES = ('coils', 'inserter_node')   # /diagnostics statuses a run depends on
@@ -137,7 +137,8 @@ class PlayerNode(Node):
         self.coils_params = AsyncParameterClient(self, self.p['coils_node'])
         self.create_timer(TICK_S, self.tick)
         self.create_timer(1.0 / self.p['progress_rate'], self.publish_progress)
-        self.create_timer(1.0, self.housekeeping)
+        self._ticks = 0   # housekeeping runs at 5 Hz; coils_node's limits are asked every 1 s
+        self.create_timer(0.2, self.housekeeping)
         if self.rig_tentacle is None:
             self.get_logger().warning('tentacle: not given: a schedule planned for another '
                                       'tentacle is not refused')
@@ -202,11 +203,16 @@ class PlayerNode(Node):
             found.append(f'another node publishes {contract.FIELD_CMD.name}: '
                          + ', '.join(self._others))
         late = time.monotonic() - self._shape_at
-        if self.loop['mode'] != 'open_loop' and self.player is not None \
-                and self.player.phase is Phase.DWELL and late > self.p['feedback_timeout_s']:
+        if self.looping() and self.player.phase is Phase.DWELL \
+                and late > self.p['feedback_timeout_s']:
             found.append(f'{self.loop["mode"]}: no {contract.VISION_SHAPE.name} for '
                          f'{min(late, 1e6):.1f} s (is tracker_node running?)')
         return tuple(found)
+
+    def looping(self):
+        """Return whether a closed loop corrects the step under way."""
+        return self.loop['mode'] != 'open_loop' and self.player is not None and \
+            self.player.step.inserted_m >= self.loop['loop_min_inserted']
 
     # -- the run -----------------------------------------------------------------------
     def limits(self):
@@ -219,7 +225,7 @@ class PlayerNode(Node):
         """Return a new Player for the schedule file, or raise ValueError saying why not."""
         if self.coils_max_field is None:
             raise ValueError(f'the limits of {self.p["coils_node"]} are not known: is it '
-                             'running? (its max_field is asked for every second)')
+                             'running? (its max_field is asked for)')
         if not self.loop['schedule']:
             raise ValueError('schedule: no schedule file given (-p schedule:=DIR/schedule.yaml)')
         try:
@@ -290,7 +296,7 @@ class PlayerNode(Node):
         if self.player is None:
             return
         self.seen.faults = self.faults()
-        busy = self.loop['mode'] != 'open_loop' and not self._loop_converged
+        busy = self.looping() and not self._loop_converged
         self.apply(self.player.update(time.monotonic(), self.seen, busy))
         if self.player.phase is not self._phase:
             self._phase = self.player.phase
@@ -344,8 +350,7 @@ class PlayerNode(Node):
     def _fresh(self, msg):
         """Return whether a tracker message may drive a correction now."""
         self._shape_at = time.monotonic()
-        if self.loop['mode'] == 'open_loop' or self.player is None or \
-                self.player.phase is not Phase.DWELL or self._loop_converged:
+        if not self.looping() or self.player.phase is not Phase.DWELL or self._loop_converged:
             return False
         if _stamp_s(msg) < self._frame_after_ros:   # taken before the last command settled
             return False
@@ -393,15 +398,19 @@ class PlayerNode(Node):
         inserted = self.player.step.inserted_m
         if inserted <= 0:
             return math.nan, math.nan
-        points = frames.coils_from_workspace(self._latest_shape, self.insertion_point)
-        try:
-            return paths.shape_error(points, self.path, min(inserted, self.path.length_m))
-        except PlanInputError:
-            return math.nan, math.nan
+        inserted = min(inserted, self.path.length_m)
+        along = np.linspace(0.0, inserted, REFERENCE_SAMPLES)
+        points = frames.coils_from_workspace(tracked_at(self._latest_shape, inserted, along),
+                                             self.insertion_point)
+        return paths.shape_error(points, self.path, inserted)
 
     def publish_progress(self):
-        """Publish /player/progress and the player's /diagnostics status."""
+        """Publish /player/progress (during a run) and the player's /diagnostics status."""
         if self.player is None:
+            ready = self.coils_max_field is not None
+            self._publish_status('ok' if ready else 'warn', 'ready' if ready else
+                                 f'waiting for the limits of {self.p["coils_node"]}',
+                                 {'phase': 'idle', 'mode': self.loop['mode']})
             return
         step, count = self.player.step, len(self.schedule.steps)
         shape_rms, tip_error = self.tracked_errors()
@@ -416,18 +425,22 @@ class PlayerNode(Node):
         values = {'phase': phase.value, 'step': step.index, 'steps': count,
                   'inserted_mm': f'{step.inserted_m * 1e3:.3f}', 'mode': self.loop['mode'],
                   'schedule': str(self.schedule.source), **self.figures.values()}
-        diag = DiagnosticArray(status=[diagnostic_status(
-            f'{NODE_NAME}: run', str(pathlib.Path(self.schedule.source).name), level,
-            f'{phase.value}' + (f': {self.player.reason}' if self.player.reason else ''),
-            values)])
-        diag.header.stamp = msg.header.stamp
+        self._publish_status(level, phase.value + (f': {self.player.reason}'
+                                                   if self.player.reason else ''), values)
+
+    def _publish_status(self, level, message, values):
+        diag = DiagnosticArray(status=[diagnostic_status(f'{NODE_NAME}: run', NODE_NAME, level,
+                                                         message, values)])
+        diag.header.stamp = self.get_clock().now().to_msg()
         self.diag_pub.publish(diag)
 
     def housekeeping(self):
         """Ask coils_node for its limits; look for other publishers of /coils/field_cmd."""
-        if self.coils_params.services_are_ready():
+        if self.coils_params.services_are_ready() and (
+                self.coils_max_field is None or self._ticks % 5 == 0):
             future = self.coils_params.get_parameters(['max_field'])
             future.add_done_callback(self._got_coils_limits)
+        self._ticks += 1
         mine = self.get_fully_qualified_name()
         self._others = sorted({f'{i.node_namespace.rstrip("/")}/{i.node_name}'
                                for i in self.get_publishers_info_by_topic(

@@ -54,8 +54,10 @@ LOOP_PARAMS = (
           'tracked shape corrects the field) or tip_angle (thesis eq. 6.10 on the tip heading)'),
     Param('reference', 'path', 'closed_loop follows: path (the desired path, as the shape '
           "error is measured) or planned (the step's planned centreline)"),
+    Param('loop_min_inserted', 0.003, 'the loop acts from this inserted length on (shorter, '
+          'the camera sees too little of the body), metre', 0.0, 1.0),
     Param('loop_rate', 15.0, 'the most corrections per second, hertz', 0.1, 100.0),
-    Param('loop_settle_s', 0.04, 'a frame counts once taken this long after the last field '
+    Param('loop_settle_s', 0.02, 'a frame counts once taken this long after the last field '
           'command (the coils slewing), second', 0.0, 5.0),
     Param('gain', 1.0, 'closed_loop: the fraction of the Gauss-Newton step taken', 0.0, 1.0),
     Param('damping', 1e-3, "closed_loop: Tikhonov damping, relative to the sensitivity's "

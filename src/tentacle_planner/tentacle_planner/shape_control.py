@@ -73,6 +73,19 @@ def at_arc_lengths(points, s):
     return interpolation_weights(points, s) @ points
 
 
+def tracked_at(seen_m, inserted_m, s):
+    """
+    Return a tracked centreline's points at arc lengths s of a body inserted_m long.
+
+    A centreline traced through pixels is longer than the body (its points jitter sideways
+    by a fraction of a pixel): its arc length is scaled to the inserted length, so its tip,
+    which the tracker finds to a few micrometres, is where the body ends.
+    """
+    seen = np.asarray(seen_m, dtype=float)
+    length = arc_lengths(seen)[-1]
+    return at_arc_lengths(seen, np.asarray(s) * (length / inserted_m if inserted_m > 0 else 0))
+
+
 def in_limits(field_t, limits):
     """Return a field (3,) T kept within CoilLimits: each axis clipped, then |B| scaled."""
     field = np.asarray(field_t, dtype=float).copy()
@@ -137,7 +150,7 @@ class ShapeController:
         if len(seen) < 2 or inserted_m <= 0:
             return Correction(field, math.nan, True, self.iterations)
         s = np.linspace(0.0, inserted_m, REFERENCE_SAMPLES)
-        error = at_arc_lengths(seen, s) - self.reference(inserted_m, s, planned_m)
+        error = tracked_at(seen, inserted_m, s) - self.reference(inserted_m, s, planned_m)
         rms = float(np.sqrt(np.mean(np.sum(error ** 2, axis=1))))
         stalled = rms > g.stall_ratio * self._last_rms
         self._last_rms = min(rms, self._last_rms)

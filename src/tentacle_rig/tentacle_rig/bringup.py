@@ -25,7 +25,8 @@ from tentacle_sim.sim_rig import NodeProcess
 # state), the watchers, the recorder (it has recorded the stop), the simulator.
 STOP_ORDER = ('commander', 'driver', 'watcher', 'recorder', 'sim')
 CONFIRMED = {'coils_node': 'outputs zero and off', 'inserter_node': 'axis stopped',
-             'backbone_node': 'axis stopped'}   # the line a driver ends with when safe
+             'backbone_node': 'axis stopped',   # the line a driver ends with when safe
+             'recorder_node': 'recording closed'}   # ... and the recorder with its bag whole
 DRIVER_STOP_S = 40.0   # a ramp to zero at the slowest slew, and its read-back
 
 
@@ -36,7 +37,7 @@ class Entry:
     name: str                 # the node name (its log file, its line at exit)
     module: str               # run as python -m module
     args: tuple = ()          # after the module: --ros-args ...
-    role: str = 'driver'      # 'sim', 'driver' (stopped first, confirmed) or 'watcher'
+    role: str = 'driver'      # 'commander', 'driver' (confirmed), 'watcher', 'recorder', 'sim'
 
 
 def _ros_args(params_file, node_name=None, **overrides):
@@ -54,7 +55,7 @@ def scene_has_backbone(scene_file):
 
 
 def sim_table(scene_file, root, device_dir=None, tracker=True, schedule=None, player=None,
-              **sim_params):
+              record=None, **sim_params):
     """
     Return the simulated rig's entries: sim_node and the drivers on config/sim/*.yaml.
 
@@ -66,6 +67,7 @@ def sim_table(scene_file, root, device_dir=None, tracker=True, schedule=None, pl
     :param schedule: a schedule file: sim_node's tentacle is the one made to its plan, and
         player_node runs to play it
     :param player: more player_node parameters (e.g. {'mode': 'closed_loop'})
+    :param record: a bag directory: recorder_node records the run into it
     :param sim_params: more sim_node parameters (e.g. camera_rate)
     """
     sim_dir = pathlib.Path(root) / 'config' / 'sim'
@@ -94,11 +96,25 @@ def sim_table(scene_file, root, device_dir=None, tracker=True, schedule=None, pl
                            _ros_args(sim_dir / 'tracker.yaml', **_camera_of(sim_params),
                                      **ports.get('tracker', {})),
                            'watcher'))
+    return table + run_entries(root, sim_dir / 'player.yaml', schedule, player, record)
+
+
+def run_entries(root, player_params, schedule=None, player=None, record=None):
+    """
+    Return the entries that play and record a run: recorder_node, then player_node.
+
+    :param player_params: player_node's params file (it runs when a schedule is given)
+    """
+    entries = []
+    if record is not None:
+        entries.append(Entry('recorder_node', 'tentacle_rig.recorder_node',
+                             _ros_args(pathlib.Path(root) / 'config' / 'recorder.yaml',
+                                       out=record), 'recorder'))
     if schedule is not None:
-        table.append(Entry('player_node', 'tentacle_planner.player_node',
-                           _ros_args(sim_dir / 'player.yaml', schedule=schedule,
-                                     **(player or {})), 'commander'))
-    return table
+        entries.append(Entry('player_node', 'tentacle_planner.player_node',
+                             _ros_args(player_params, schedule=schedule, **(player or {})),
+                             'commander'))
+    return entries
 
 
 def _camera_of(sim_params):
@@ -106,14 +122,17 @@ def _camera_of(sim_params):
     return {k: sim_params[k] for k in ('base_px', 'metres_per_px') if k in sim_params}
 
 
-def real_table(config_dir):
+def real_table(config_dir, root=None, schedule=None, player=None, record=None):
     """
     Return the real rig's entries: each driver whose params file is in config_dir.
 
     coils.yaml (coils_node), inserter.yaml (inserter_node), backbone.yaml (backbone_node),
-    camera.yaml (camera_node), tracker.yaml (tracker_node).
+    camera.yaml (camera_node), tracker.yaml (tracker_node); with a schedule, player_node on
+    player.yaml (the lab's: its limits and its tentacle file); with ``record``, recorder_node
+    on the project's config/recorder.yaml (``root``).
 
-    :raises FileNotFoundError: the folder has none of them
+    :raises FileNotFoundError: the folder has none of the drivers' files, or a schedule is
+        given without player.yaml
     """
     folder = pathlib.Path(config_dir)
     rows = [('coils.yaml', 'coils_node', 'tentacle_coils.coils_node', None, 'driver'),
@@ -128,7 +147,11 @@ def real_table(config_dir):
     if not table:
         raise FileNotFoundError(f'{folder}: none of coils.yaml, inserter.yaml, backbone.yaml, '
                                 'camera.yaml, tracker.yaml')
-    return table
+    if schedule is not None and not (folder / 'player.yaml').is_file():
+        raise FileNotFoundError(f'{folder}: no player.yaml to play a schedule with (copy '
+                                'config/sim/player.yaml and set the tentacle file and limits '
+                                'of this rig)')
+    return table + run_entries(root, folder / 'player.yaml', schedule, player, record)
 
 
 class RigError(RuntimeError):

@@ -307,9 +307,23 @@ class RigCommander(Node):
                               f'after {timeout_s:g} s')
             time.sleep(0.02)
 
+    def wait_for_player(self, timeout_s=30.0):
+        """Wait until player_node says it is ready (it knows the coils' limits) or runs."""
+        def ready():
+            state = self.run_state()
+            return state is not None and (state[0] != 'idle' or state[1] == 'ready')
+        if self._wait(ready, timeout_s):
+            return Result(Outcome.DONE, 'the player is ready')
+        state = self.run_state()
+        return Result(Outcome.TIMED_OUT, f'player_node: {state[1] if state else "not heard"} '
+                      f'after {timeout_s:g} s')
+
     def play(self, schedule=None, retract=False, timeout_s=600.0, on_progress=None,
              **player_params):
         """Set the schedule (and any player parameters), start, wait; return the Result."""
+        result = self.wait_for_player(min(timeout_s, 30.0))
+        if not result:
+            return result
         values = dict(player_params, **({'schedule': str(schedule)} if schedule else {}))
         if values:
             result = self.set_player(**values)

@@ -2,14 +2,20 @@
 scripts/rig: bring the whole rig up from one process table, and down safely.
 
     scripts/rig --sim config/scenes/pancreatic_duct.yaml
+    scripts/rig --sim config/scenes/pancreatic_duct.yaml --schedule out/schedule.yaml \
+                --record out/bags            # + player_node and recorder_node
     scripts/rig --real config/lab            # coils.yaml, inserter.yaml, ... found there
 
 ``--sim`` starts sim_node, coils_node, inserter_node (backbone_node where the scene has a
 backbone) and tracker_node (bringup.sim_table); ``--real`` starts the drivers whose params
-files a folder holds (bringup.real_table). Each node is its own process, its output in
-``--logs``. Ctrl-C (or SIGTERM) stops the drivers first, each confirming its safe state
-(supplies at zero and off, axes stopped), then the tracker, then the simulator; further
-Ctrl-C only say that the stop goes on. If a node dies on its own the rig is stopped the
+files a folder holds (bringup.real_table). ``--schedule`` adds player_node (the simulated
+tentacle is then the one made to that plan; on the real rig the folder's player.yaml is
+used), and ``--record DIR`` recorder_node, writing DIR/<date-time> (a rosbag2 directory
+with one MCAP file). Play with ``scripts/rig-command play``. Each node is its own process,
+its output in ``--logs``. Ctrl-C (or SIGTERM) stops the player first, then the drivers, each
+confirming its safe state (supplies at zero and off, axes stopped), then the tracker, the
+recorder (its bag closed and readable) and the simulator; further Ctrl-C only say that the
+stop goes on. If a node dies on its own the rig is stopped the
 same way. DDS discovery stays on this machine (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST)
 unless the environment sets it: set ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET (and a
 ROS_DOMAIN_ID of the lab's) to let other machines see and command the rig.
@@ -45,6 +51,12 @@ def build_parser():
     parser.add_argument('--no-tracker', action='store_true', help='--sim: no tracker_node')
     parser.add_argument('--sim-param', action='append', default=[], metavar='NAME:=VALUE',
                         help='--sim: a sim_node parameter (repeatable), e.g. camera_rate:=15')
+    parser.add_argument('--schedule', metavar='FILE', help='run player_node for this schedule '
+                        '(tentacle-plan --out DIR writes DIR/schedule.yaml)')
+    parser.add_argument('--mode', choices=('open_loop', 'closed_loop', 'tip_angle'),
+                        help="--schedule: the player's mode (default its params file's)")
+    parser.add_argument('--record', metavar='DIR', help='record the session into '
+                        'DIR/<date-time> (rosbag2, MCAP)')
     parser.add_argument('--logs', help="folder for the nodes' output (default "
                         '/tmp/tentacle_rig/<date-time>)')
     return parser
@@ -65,17 +77,23 @@ def discovery_note(environ):
 def table_of(opts, parser):
     """Return the process table the options ask for (a usage error if they do not fit)."""
     from tentacle_rig import bringup
+    if opts.mode and not opts.schedule:
+        parser.error('--mode goes with --schedule')
+    player = {'mode': opts.mode} if opts.mode else None
+    record = None if opts.record is None else \
+        str(pathlib.Path(opts.record) / time.strftime('%Y%m%d-%H%M%S'))
     if opts.real:
         if opts.device_dir or opts.no_tracker or opts.sim_param:
             parser.error('--device-dir, --no-tracker and --sim-param go with --sim')
-        return bringup.real_table(opts.real)
+        return bringup.real_table(opts.real, ROOT, opts.schedule, player, record)
     params = {}
     for item in opts.sim_param:
         name, sep, value = item.partition(':=')
         if not sep or not name:
             parser.error(f'--sim-param {item!r}: expected NAME:=VALUE')
         params[name] = value
-    return bringup.sim_table(opts.sim, ROOT, opts.device_dir, not opts.no_tracker, **params)
+    return bringup.sim_table(opts.sim, ROOT, opts.device_dir, not opts.no_tracker,
+                             opts.schedule, player, record, **params)
 
 
 def main(args=None):

@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: venv demo test test-fast lint build bench bench-model campaign clean
+.PHONY: venv demo demo-coils test test-fast lint build bench bench-model campaign clean
 
 venv: $(STAMP)
 
@@ -14,9 +14,14 @@ $(STAMP): requirements.txt
 	$(PY) -m pip install --quiet -r requirements.txt
 	touch $(STAMP)
 
+# The main job: plan the pancreatic duct, play it on the simulated rig open loop, closed
+# loop and tip-driven, write out/ (schedule.yaml, report.json, report.md, PNGs, recordings).
+demo: $(STAMP)
+	$(PY) scripts/demo_navigation.py
+
 # Bring up three emulated supplies and the coils node, command a rotating field,
 # print per axis what the supplies were told and what they measured.
-demo: $(STAMP)
+demo-coils: $(STAMP)
 	$(PY) scripts/demo_coils.py
 
 # Unit tests, cross-process tests over DDS and the colcon layout check.

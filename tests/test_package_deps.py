@@ -25,6 +25,8 @@ IMPORT_KEYS = {  # import name -> rosdep key
     'scipy': 'python3-scipy',
     'serial': 'python3-serial',
     'threadpoolctl': 'python3-threadpoolctl',
+    'rosbags': 'python3-rosbags',
+    'tqdm': 'python3-tqdm',
     'yaml': 'python3-yaml',
     **{ros: ros for ros in ('rclpy', 'rcl_interfaces', 'std_msgs', 'std_srvs',
                             'geometry_msgs', 'sensor_msgs', 'nav_msgs', 'diagnostic_msgs',

@@ -82,6 +82,7 @@ def player_service(verb):
         raise ValueError(f'{verb!r} is not a player service ({", ".join(PLAYER_VERBS)})')
     return Service(f'/player/{verb}', 'std_srvs/srv/Trigger')
 
+
 _TOKEN = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')
 
 

@@ -29,8 +29,9 @@ def playback(model, plan, target, step_m, constraints, iterations=50, progress=N
     :param plan: a Plan (its directions are held; its key fields start the interpolation)
     :param target: callable (chain, inserted_m) -> (n + 1, 3) follow-the-leader target, m
     :param step_m: insertion between dense steps, m
-    :param constraints: Constraints (field limits apply at every dense step; a field change
-        over max_field_change_t between consecutive dense steps is flagged)
+    :param constraints: Constraints (field limits apply at every dense step; where the best
+        field would change by more than max_field_change_t from the dense step before, it is
+        held to that change, and flagged: the rig refuses the larger change)
     :param iterations: Gauss-Newton budget per dense step
     :param progress: called with (steps done, steps, None) after every dense step
     """
@@ -43,6 +44,14 @@ def playback(model, plan, target, step_m, constraints, iterations=50, progress=N
         problem = Problem(model, [inserted_m], [target(model.chain(inserted_m), inserted_m)],
                           constraints, directions=plan.directions, start=start)
         x = fit(problem, problem.pack(plan.directions, [guess]), iterations)
+        change = constraints.max_field_change_t
+        if change is not None and steps:   # the rig refuses a larger change: keep within
+            previous, field = steps[-1].field_t, problem.unpack(x)[1][0]
+            held = np.clip(field, previous - change, previous + change)
+            if np.any(held != field):
+                x = problem.pack(plan.directions, [held])
+                flags.append(f'field change held to the limit into the dense step at '
+                             f'{inserted_m * 1e3:.1f} mm')
         solution = problem.simulate(x)[-1]
         step = problem.plan(x).steps[0]
         steps.append(step)
@@ -50,11 +59,6 @@ def playback(model, plan, target, step_m, constraints, iterations=50, progress=N
             flags.append(f'dense step at {inserted_m * 1e3:.1f} mm did not converge')
         elif not step.stability > 0:
             flags.append(f'unstable dense step at {inserted_m * 1e3:.1f} mm')
-        change = constraints.max_field_change_t
-        if change is not None and steps[:-1] and np.max(
-                np.abs(step.field_t - steps[-2].field_t)) > change * (1 + 1e-6):
-            flags.append(f'field change over the limit into the dense step at '
-                         f'{inserted_m * 1e3:.1f} mm')
         start = (solution.state, inserted_m)
         if progress is not None:
             progress(len(steps), len(lengths), None)

@@ -22,7 +22,6 @@ and /diagnostics. On exit a run still commanding is aborted: zero field, stages 
 
 from collections import deque
 import math
-import pathlib
 import sys
 import time
 
@@ -51,7 +50,7 @@ from tentacle_planner.schedule_file import read_schedule
 from tentacle_planner.shape_control import (Gains, in_limits, REFERENCE_SAMPLES,
                                             ShapeController, TipAngleController, tracked_at)
 
-TICK_S = 0.02           # the player's clock tick, s
+TICK_S = 0.01           # the player's clock tick, s
 DRIVER_PREFIXES = ('coils', 'inserter_node')   # /diagnostics statuses a run depends on
 
 
@@ -208,6 +207,16 @@ class PlayerNode(Node):
             found.append(f'{self.loop["mode"]}: no {contract.VISION_SHAPE.name} for '
                          f'{min(late, 1e6):.1f} s (is tracker_node running?)')
         return tuple(found)
+
+    def waiting_for(self):
+        """Return what the player has not heard yet and needs to start: [] when ready."""
+        missing = [] if self.coils_max_field is not None else \
+            [f'the limits of {self.p["coils_node"]}']
+        if self.seen.field_t is None:
+            missing.append(contract.FIELD.name)
+        if 'inserter' not in self.seen.positions_m:
+            missing.append(contract.axis_state('inserter').name)
+        return missing
 
     def looping(self):
         """Return whether a closed loop corrects the step under way."""
@@ -407,9 +416,9 @@ class PlayerNode(Node):
     def publish_progress(self):
         """Publish /player/progress (during a run) and the player's /diagnostics status."""
         if self.player is None:
-            ready = self.coils_max_field is not None
-            self._publish_status('ok' if ready else 'warn', 'ready' if ready else
-                                 f'waiting for the limits of {self.p["coils_node"]}',
+            waiting = self.waiting_for()
+            self._publish_status('warn' if waiting else 'ok',
+                                 f'waiting for {", ".join(waiting)}' if waiting else 'ready',
                                  {'phase': 'idle', 'mode': self.loop['mode']})
             return
         step, count = self.player.step, len(self.schedule.steps)

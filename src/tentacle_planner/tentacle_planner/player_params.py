@@ -18,7 +18,7 @@ PLAYER_PARAMS = (
     Param('tentacle', '', "the rig's tentacle file: a schedule planned for another tentacle "
           'is refused (empty: not checked, and said so at start)'),
     Param('coils_node', 'coils_node', "the coil driver's node name: its max_field is asked "
-          "for and a schedule over it refused"),
+          'for and a schedule over it refused'),
     Param('max_field', 0.022, 'largest field component per axis a schedule may use, tesla',
           0.0, 0.2),
     Param('max_total_field', 0.030, 'largest |B| a schedule may use, tesla', 0.0, 0.35),
@@ -26,7 +26,7 @@ PLAYER_PARAMS = (
           'the next (and from and to zero), tesla', 0.0, 0.35),
     Param('insertion_offset_m', 0.0, "the inserter stage's position with the tip at the "
           'insertion point, metre', -1.0, 1.0),
-    Param('backbone', True, "command the backbone stage where the schedule has its reach "
+    Param('backbone', True, 'command the backbone stage where the schedule has its reach '
           '(/backbone/target)'),
     Param('stage_speed', 0.005, "the stages' speed, metre per second (a move's expected time)",
           1e-6, 1.0),

@@ -120,8 +120,11 @@ class RigCommander(Node):
                 self._keep('player', status)
 
     def latest(self, key, since=-math.inf):
-        """Return the newest message of a kind ('field', 'progress', 'state:<axis>', 'player')
-        received after a monotonic time, or None."""
+        """
+        Return the newest message of a kind received after a monotonic time, or None.
+
+        Kinds: 'field', 'progress', 'state:<axis>', 'player' (its /diagnostics status).
+        """
         with self._lock:
             got = self._latest.get(key)
         return got[1] if got is not None and got[0] >= since else None
@@ -158,6 +161,16 @@ class RigCommander(Node):
             return Result(Outcome.DONE, 'the rig is up')
         return Result(Outcome.TIMED_OUT, f'nothing from {", ".join(missing())} in '
                       f'{timeout_s:g} s: is the rig up?')
+
+    def wait_for_subscriptions(self, node_name, topics, timeout_s=10.0):
+        """Wait until a node (by name) subscribes to each of the topics (contract rows)."""
+        def missing():
+            return [t.name for t in topics if node_name not in
+                    {i.node_name for i in self.get_subscriptions_info_by_topic(t.name)}]
+        if self._wait(lambda: not missing(), timeout_s):
+            return Result(Outcome.DONE, f'{node_name} subscribes')
+        return Result(Outcome.TIMED_OUT, f'{node_name} does not subscribe to '
+                      f'{", ".join(missing())} after {timeout_s:g} s')
 
     def field_t(self):
         """Return the field read back (3,), T, or None."""
@@ -197,8 +210,11 @@ class RigCommander(Node):
                       f'after {timeout_s:g} s (coils_node logs a refusal)')
 
     def release_field(self):
-        """Stop holding the field (coils_node ramps it to zero after its watchdog_s) and stop
-        publishing field commands (a player may then play)."""
+        """
+        Stop holding the field and stop publishing field commands (a player may then play).
+
+        coils_node ramps the field to zero after its watchdog_s.
+        """
         self._held = None
         with self._lock:
             pub, self.field_pub = self.field_pub, None
@@ -239,7 +255,7 @@ class RigCommander(Node):
         return self._call(contract.COILS_ENABLE, SetBool.Request(data=bool(on)), timeout_s)
 
     def estop(self, on, timeout_s=5.0):
-        """Publish the estop (latched); wait until the rig subscribes first."""
+        """Publish the latched estop state once the rig subscribes to it."""
         if not self._wait(lambda: self.estop_pub.get_subscription_count() > 0, timeout_s):
             return Result(Outcome.TIMED_OUT, f'no subscriber to {contract.ESTOP.name}')
         self.estop_pub.publish(Bool(data=bool(on)))
@@ -264,7 +280,7 @@ class RigCommander(Node):
             Result(Outcome.DONE, 'set')
 
     def player(self, verb, timeout_s=10.0):
-        """Call /player/<verb>: start, retract, pause, resume or abort."""
+        """Call the player's service of a verb: start, retract, pause, resume or abort."""
         return self._call(contract.player_service(verb), Trigger.Request(), timeout_s)
 
     def progress(self):

@@ -3,8 +3,9 @@ recorder_node: record the rig's topics into a rosbag2 directory (MCAP), closed o
 
 Every topic of the contract (tentacle_common.contract) is recorded whole as it arrives (its
 serialized bytes, its receive time), except the camera's frames: at most ``image_rate`` a
-second, as sensor_msgs/CompressedImage on /camera/image_raw/compressed (``image_format``
-jpeg or png, as image_transport's compressed frames; Foxglove shows them). /vision/debug_image
+second, each side scaled by ``image_scale``, as sensor_msgs/CompressedImage on
+/camera/image_raw/compressed (``image_format`` jpeg or png, as image_transport's compressed
+frames; Foxglove shows them). /vision/debug_image
 is not recorded. Ctrl-C or SIGTERM closes the bag: metadata.yaml is written and the MCAP
 file finished, readable by ``ros2 bag``, Foxglove and tentacle_rig.recording.read_bag.
 """
@@ -15,11 +16,10 @@ import time
 import cv2
 import numpy as np
 from rclpy.node import Node
-from rclpy.serialization import serialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import CompressedImage, Image
 from tentacle_common import contract
-from tentacle_common.driver_node import (declare_parameters, interface, qos_profile, run_node,
-                                         subscription)
+from tentacle_common.driver_node import declare_parameters, interface, qos_profile, run_node
 from tentacle_common.errors import ConfigError
 from tentacle_rig.recorder_params import IMAGE_FORMATS, NODE_NAME, RECORDER_PARAMS
 from tentacle_rig.recording import FrameGate, Recording
@@ -51,17 +51,18 @@ class RecorderNode(Node):
         except (FileExistsError, OSError) as exc:
             raise ConfigError(f'out: {exc}') from None
         self.format, self.quality = p['image_format'], p['jpeg_quality']
+        self.scale = p['image_scale']
         self.gate = FrameGate(p['image_rate'])
         self._refused_encodings = set()
-        for topic in topics:
-            if topic.msg_type == 'sensor_msgs/msg/Image':
-                subscription(self, topic, lambda msg, t=topic: self.on_image(t, msg))
-            else:
-                self.create_subscription(interface(topic.msg_type), topic.name,
-                                         lambda raw, t=topic: self.on_raw(t, raw),
-                                         qos_profile(topic.qos), raw=True)
+        for topic in topics:   # serialized: a frame is only deserialized when it is kept
+            handler = self.on_image if topic.msg_type == 'sensor_msgs/msg/Image' else \
+                self.on_raw
+            self.create_subscription(interface(topic.msg_type), topic.name,
+                                     lambda raw, t=topic, h=handler: h(t, raw),
+                                     qos_profile(topic.qos), raw=True)
         self.get_logger().info(f'recording {len(topics)} topics into {out} (camera frames '
-                               f'as {self.format} at most {p["image_rate"]:g} Hz)')
+                               f'as {self.format} at most {p["image_rate"]:g} Hz, scaled '
+                               f'{self.scale:g})')
 
     def now_ns(self):
         """Return the ROS clock now, ns."""
@@ -71,13 +72,14 @@ class RecorderNode(Node):
         """Write one serialized message."""
         self.recording.write(topic.name, self.now_ns(), raw)
 
-    def on_image(self, topic, msg):
-        """Write a frame, compressed, when the gate lets it through."""
+    def on_image(self, topic, raw):
+        """Write a frame, scaled and compressed, when the gate lets it through."""
         now = self.now_ns()
         if not self.gate.passes(now * 1e-9):
             return
+        msg = deserialize_message(raw, Image)
         try:
-            data = encode(msg, self.format, self.quality)
+            data = encode(msg, self.format, self.quality, self.scale)
         except ValueError as exc:   # said once per encoding; the other topics go on
             if msg.encoding not in self._refused_encodings:
                 self._refused_encodings.add(msg.encoding)
@@ -94,8 +96,8 @@ class RecorderNode(Node):
                 f'{counts.get(contract.IMAGE.name, 0)} frames)')
 
 
-def encode(msg: Image, fmt, quality):
-    """Return a mono8 or bgr8/rgb8 Image's bytes as JPEG or PNG."""
+def encode(msg: Image, fmt, quality, scale=1.0):
+    """Return a mono8 or bgr8/rgb8 Image's bytes as JPEG or PNG, each side scaled."""
     channels = {'mono8': 1, 'bgr8': 3, 'rgb8': 3}.get(msg.encoding)
     if channels is None:
         raise ValueError(f'frames of encoding {msg.encoding!r} are not recorded')
@@ -103,6 +105,8 @@ def encode(msg: Image, fmt, quality):
         msg.height, msg.step)[:, :msg.width * channels].reshape(msg.height, msg.width, channels)
     if msg.encoding == 'rgb8':
         pixels = pixels[..., ::-1]
+    if scale != 1.0:
+        pixels = cv2.resize(pixels, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
     if fmt == 'jpeg':
         ok, data = cv2.imencode('.jpg', pixels, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
     else:

@@ -1,6 +1,8 @@
 """
-A run's recording: a rosbag2 directory (metadata.yaml and one MCAP file), as ``ros2 bag``
-writes it and Foxglove opens it, written and read with the rosbags package (no ROS needed).
+A run's recording: a rosbag2 directory (metadata.yaml and one MCAP file).
+
+As ``ros2 bag`` writes it and Foxglove opens it, written and read with the rosbags package
+(no ROS needed).
 
 ``Recording`` takes serialized (CDR) messages of the contract's topics, each under its
 type's Jazzy definition and its QoS, and is closed into a bag that ``ros2 bag info`` and
@@ -24,7 +26,7 @@ _FOREVER = QosTime(0x7FFFFFFF, 0xFFFFFFFF)   # rosbag2's "infinite" duration
 
 
 def typestore():
-    """Return the ROS 2 Jazzy type store (message definitions and CDR codecs)."""
+    """Return rosbags' ROS 2 Jazzy type store: message definitions and CDR codecs."""
     return get_typestore(Stores.ROS2_JAZZY)
 
 
@@ -91,8 +93,10 @@ class FrameGate:
 
     def __init__(self, rate_hz):
         """Fix the rate, Hz."""
-        self.period_s = None if rate_hz is None else (float('inf') if rate_hz <= 0
-                                                       else 1.0 / rate_hz)
+        if rate_hz is None:
+            self.period_s = None
+        else:
+            self.period_s = float('inf') if rate_hz <= 0 else 1.0 / rate_hz
         self._next = -float('inf')
 
     def passes(self, time_s):

@@ -219,14 +219,15 @@ class Player:
             return self.hold()
         fault = self.fault_of(now, seen)
         if fault:
-            return self._fault(now, fault)
+            return self._fault(now, fault, seen)
         if self.phase is Phase.MOVING:
             missing = self.arrived(seen)
             if not missing:
                 self.phase, self._since = Phase.DWELL, now
             elif now > self._deadline:
                 return self._fault(now, f'step {self.step.index}: not there after '
-                                        f'{now - self._sent_at:.1f} s: ' + '; '.join(missing))
+                                        f'{now - self._sent_at:.1f} s: ' + '; '.join(missing),
+                                   seen)
             return self.hold()
         if now - self._since < self.settings.dwell_s or busy:
             return self.hold()
@@ -243,9 +244,9 @@ class Player:
         self.bias_t = self.field_t - self.step.field_t
         return Command(self.field_t, {})
 
-    def _fault(self, now, reason):
+    def _fault(self, now, reason, seen=None):
         if self.settings.abort_on_fault:
-            command = self.abort(now, reason)
+            command = self.abort(now, reason, seen)
         else:
             self.phase, self.reason, self._since = Phase.PAUSED, reason, now
             command = self.hold()
@@ -268,9 +269,16 @@ class Player:
             raise ValueError(f'not resumed: {fault}')
         return self._command_step(now, self.index, f'resumed at step {self.step.index}')
 
-    def abort(self, now, reason='asked to'):
-        """Command zero field and stop the stages; the run ends."""
+    def abort(self, now, reason='asked to', seen=None):
+        """
+        Command zero field and stop the stages that move; the run ends.
+
+        A stage at rest is left as it is (a stop would leave it to be homed again): one that
+        moves, or was sent a target not yet reached, is stopped.
+        """
+        moving = self.phase is Phase.MOVING or (seen is not None and any(
+            abs(v) > self.settings.still_m_s for v in seen.velocities_m_s.values()))
         self.phase, self.reason, self._since = Phase.ABORTED, reason, now
         self.field_t = np.zeros(3)
-        return Command(self.field_t, {}, stop_axes=True,
+        return Command(self.field_t, {}, stop_axes=moving,
                        said=[f'aborted at step {self.step.index}: {reason}'])

@@ -290,7 +290,7 @@ class PlayerNode(Node):
                 self.seen.faults = self.faults()
                 command = self.player.resume(now, self.seen)
             else:
-                command = self.player.abort(now)
+                command = self.player.abort(now, seen=self.seen)
                 self._abort_pending = True
         except ValueError as exc:
             response.success, response.message = False, str(exc)
@@ -316,8 +316,7 @@ class PlayerNode(Node):
                 np.abs(self.seen.field_t).max() <= self.p['field_tolerance']:
             self._abort_pending = False
             self.get_logger().info('aborted: the field reads zero ('
-                                   f'{np.abs(self.seen.field_t).max() * 1e3:.3f} mT), stages '
-                                   'stopped')
+                                   f'{np.abs(self.seen.field_t).max() * 1e3:.3f} mT)')
 
     def apply(self, command):
         """Send a Command: the targets, the field (on change and at hold_rate), stops."""
@@ -467,8 +466,8 @@ class PlayerNode(Node):
         """Abort a run that still commands the rig; return the line said at exit."""
         if self.player is None or self.player.phase in (Phase.IDLE, Phase.ABORTED):
             return 'no run commanding the rig'
-        self.apply(self.player.abort(time.monotonic(), 'the player is stopping'))
-        return 'run aborted: zero field commanded, stages stopped'
+        self.apply(self.player.abort(time.monotonic(), 'the player is stopping', self.seen))
+        return 'run aborted: zero field commanded, moving stages stopped'
 
 
 def main(args=None):

@@ -118,6 +118,8 @@ class RigCommander(Node):
         for status in msg.status:
             if status.name == 'player_node: run':
                 self._keep('player', status)
+            elif status.name == 'recorder_node: bag':
+                self._keep('recorder', status)
 
     def latest(self, key, since=-math.inf):
         """
@@ -162,14 +164,18 @@ class RigCommander(Node):
         return Result(Outcome.TIMED_OUT, f'nothing from {", ".join(missing())} in '
                       f'{timeout_s:g} s: is the rig up?')
 
-    def wait_for_subscriptions(self, node_name, topics, timeout_s=10.0):
-        """Wait until a node (by name) subscribes to each of the topics (contract rows)."""
+    def wait_for_recorder(self, topics, timeout_s=15.0):
+        """Wait until recorder_node has a publisher matched on each topic (contract rows)."""
+        since = time.monotonic()   # a status from before may be an earlier recorder's
+
         def missing():
-            return [t.name for t in topics if node_name not in
-                    {i.node_name for i in self.get_subscriptions_info_by_topic(t.name)}]
+            status = self.latest('recorder', since)
+            matched = set() if status is None else set(
+                {v.key: v.value for v in status.values}.get('matched', '').split(','))
+            return [t.name for t in topics if t.name not in matched]
         if self._wait(lambda: not missing(), timeout_s):
-            return Result(Outcome.DONE, f'{node_name} subscribes')
-        return Result(Outcome.TIMED_OUT, f'{node_name} does not subscribe to '
+            return Result(Outcome.DONE, 'recording')
+        return Result(Outcome.TIMED_OUT, f'recorder_node has no publisher on '
                       f'{", ".join(missing())} after {timeout_s:g} s')
 
     def field_t(self):

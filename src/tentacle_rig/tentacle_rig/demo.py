@@ -85,8 +85,7 @@ def run_mode(mode, schedule, recording, logs):
                 recorded = [contract.PLAYER_PROGRESS, contract.SIM_SHAPE, contract.FIELD_CMD]
                 for step in (commander.wait_for_rig, commander.home,
                              commander.capture_background,
-                             lambda: commander.wait_for_subscriptions('recorder_node',
-                                                                      recorded)):
+                             lambda: commander.wait_for_recorder(recorded)):
                     result = step()
                     if not result:
                         raise RuntimeError(f'{mode}: {result.message}')

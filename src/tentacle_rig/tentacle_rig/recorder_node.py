@@ -13,16 +13,20 @@ file finished, readable by ``ros2 bag``, Foxglove and tentacle_rig.recording.rea
 import sys
 import time
 
+from diagnostic_msgs.msg import DiagnosticArray
 import cv2
 import numpy as np
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import CompressedImage, Image
 from tentacle_common import contract
-from tentacle_common.driver_node import declare_parameters, interface, qos_profile, run_node
+from tentacle_common.driver_node import (declare_parameters, diagnostic_status, interface,
+                                         publisher, qos_profile, run_node)
 from tentacle_common.errors import ConfigError
 from tentacle_rig.recorder_params import IMAGE_FORMATS, NODE_NAME, RECORDER_PARAMS
 from tentacle_rig.recording import FrameGate, Recording
+
+STATUS_PERIOD_S = 0.2   # /diagnostics: which topics have a publisher matched
 
 
 def recorded_topics():
@@ -54,15 +58,29 @@ class RecorderNode(Node):
         self.scale = p['image_scale']
         self.gate = FrameGate(p['image_rate'])
         self._refused_encodings = set()
+        self.subscriptions_by_topic = {}
         for topic in topics:   # serialized: a frame is only deserialized when it is kept
             handler = self.on_image if topic.msg_type == 'sensor_msgs/msg/Image' else \
                 self.on_raw
-            self.create_subscription(interface(topic.msg_type), topic.name,
-                                     lambda raw, t=topic, h=handler: h(t, raw),
-                                     qos_profile(topic.qos), raw=True)
+            self.subscriptions_by_topic[topic.name] = self.create_subscription(
+                interface(topic.msg_type), topic.name,
+                lambda raw, t=topic, h=handler: h(t, raw), qos_profile(topic.qos), raw=True)
+        self.diag_pub = publisher(self, contract.DIAGNOSTICS)
+        self.create_timer(STATUS_PERIOD_S, self.publish_status)
         self.get_logger().info(f'recording {len(topics)} topics into {out} (camera frames '
                                f'as {self.format} at most {p["image_rate"]:g} Hz, scaled '
                                f'{self.scale:g})')
+
+    def publish_status(self):
+        """Say what is recorded: the topics with a publisher matched (a run may start)."""
+        matched = sorted(name for name, sub in self.subscriptions_by_topic.items()
+                         if sub.get_publisher_count() > 0)
+        values = {'bag': str(self.recording.path), 'matched': ','.join(matched),
+                  'messages': sum(self.recording.counts.values())}
+        msg = DiagnosticArray(status=[diagnostic_status(
+            f'{NODE_NAME}: bag', NODE_NAME, 'ok', f'recording {len(matched)} topics', values)])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.diag_pub.publish(msg)
 
     def now_ns(self):
         """Return the ROS clock now, ns."""

@@ -54,6 +54,13 @@ TICK_S = 0.01           # the player's clock tick, s
 DRIVER_PREFIXES = ('coils', 'inserter_node')   # /diagnostics statuses a run depends on
 
 
+def _name_of(endpoint):
+    """Return a publisher's node as /namespace/name (discovery may not know it yet)."""
+    if endpoint.node_name == '_NODE_NAME_UNKNOWN_':
+        return 'a node not yet named by discovery'
+    return f'{endpoint.node_namespace.rstrip("/")}/{endpoint.node_name}'
+
+
 def _stamp_s(msg):
     return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
 
@@ -450,9 +457,8 @@ class PlayerNode(Node):
             future.add_done_callback(self._got_coils_limits)
         self._ticks += 1
         mine = self.get_fully_qualified_name()
-        self._others = sorted({f'{i.node_namespace.rstrip("/")}/{i.node_name}'
-                               for i in self.get_publishers_info_by_topic(
-                                   contract.FIELD_CMD.name)} - {mine})
+        self._others = sorted({_name_of(i) for i in self.get_publishers_info_by_topic(
+            contract.FIELD_CMD.name)} - {mine})
 
     def _got_coils_limits(self, future):
         try:

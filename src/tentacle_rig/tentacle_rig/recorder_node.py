@@ -13,8 +13,8 @@ file finished, readable by ``ros2 bag``, Foxglove and tentacle_rig.recording.rea
 import sys
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray
 import cv2
+from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message, serialize_message

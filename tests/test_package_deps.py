@@ -30,7 +30,8 @@ IMPORT_KEYS = {  # import name -> rosdep key
     'yaml': 'python3-yaml',
     **{ros: ros for ros in ('rclpy', 'rcl_interfaces', 'std_msgs', 'std_srvs',
                             'geometry_msgs', 'sensor_msgs', 'nav_msgs', 'diagnostic_msgs',
-                            'visualization_msgs', 'ament_index_python')},
+                            'visualization_msgs', 'ament_index_python', 'launch',
+                            'launch_ros')},
 }
 PACKAGES = sorted(p for p in (ROOT / 'src').iterdir() if (p / 'package.xml').exists())
 

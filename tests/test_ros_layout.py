@@ -30,7 +30,7 @@ EXECUTABLES = {  # DESIGN.md, "Packages" ('-': a package without executables)
 MORE_EXECUTABLES = {  # ours beyond DESIGN.md's table
     'tentacle_coils': ['calibrate_coils'],
     'tentacle_vision': ['calibrate_camera'],
-    'tentacle_rig': ['rig', 'rig_command'],
+    'tentacle_rig': ['rig', 'rig_command', 'recorder_node'],
 }
 MORE_PACKAGES = ['tentacle_rig']  # beyond DESIGN.md's table: the rig as a whole
 COLCON = str(pathlib.Path(sys.executable).parent / 'colcon')
@@ -95,6 +95,8 @@ def test_executables_are_installed_and_indexed(workspace):
         for executable in executables:
             path = lib_dir(layout, install, package) / executable
             assert path.exists() and os.access(path, os.X_OK), f'{path} missing'
+    share = install if layout == 'merge' else install / 'tentacle_rig'
+    assert (share / 'share/tentacle_rig/launch/rig.launch.py').is_file()   # for ros2 launch
 
 
 def test_every_executable_answers_help_through_the_ament_index(workspace):

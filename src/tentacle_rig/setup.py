@@ -9,6 +9,7 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/launch', ['launch/rig.launch.py']),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
@@ -22,6 +23,7 @@ setup(
         'console_scripts': [
             'rig = tentacle_rig.rig_cli:main',
             'rig_command = tentacle_rig.command_node:main',
+            'recorder_node = tentacle_rig.recorder_node:main',
         ],
     },
 )

@@ -14,6 +14,7 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 SOURCES = [str(p) for p in sorted((ROOT / 'src').iterdir()) if (p / 'package.xml').exists()]
 sys.path[:0] = SOURCES
 os.environ['PYTHONPATH'] = os.pathsep.join(SOURCES + [os.environ.get('PYTHONPATH', '')])
+# A domain of its own (not the rig's: a rig may be running) on this machine only.
 os.environ.setdefault('ROS_DOMAIN_ID', str(200 + os.getpid() % 30))
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 

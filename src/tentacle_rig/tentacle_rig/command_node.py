@@ -21,6 +21,7 @@ refused or did not answer, 2 a usage error.
 
 import argparse
 import math
+import os
 import signal
 import sys
 import threading
@@ -33,6 +34,7 @@ from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Bool, Float64
 from std_srvs.srv import SetBool, Trigger
 from tentacle_common import contract
+from tentacle_common.discovery import private_by_default
 from tentacle_common.driver_node import client, publisher, subscription
 from tentacle_common.waiting import wait_for
 
@@ -188,6 +190,7 @@ def main(args=None):
     if not contract.is_name_token(opts.axis):
         print(f'rig-command: --axis {opts.axis!r} is not one ROS name token', file=sys.stderr)
         sys.exit(2)
+    private_by_default(os.environ)   # the rig's domain, as scripts/rig sets it
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)   # Ctrl-C is ours
     node = rclpy.create_node('rig_command')
     try:

@@ -20,6 +20,7 @@ watchdog ramps an unrenewed field to zero after watchdog_s) until ``release_fiel
 from dataclasses import dataclass
 import enum
 import math
+import os
 import threading
 import time
 
@@ -34,6 +35,7 @@ from rclpy.parameter_client import AsyncParameterClient
 from std_msgs.msg import Bool, Float64
 from std_srvs.srv import SetBool, Trigger
 from tentacle_common import contract
+from tentacle_common.discovery import private_by_default
 from tentacle_common.driver_node import client, publisher, subscription
 
 HOLD_PERIOD_S = 0.2     # a held field is sent again this often
@@ -77,7 +79,12 @@ class RigCommander(Node):
     """The rig's topics and services behind a few calls with deadlines."""
 
     def __init__(self, name='rig_commander', axes=contract.AXES):
-        """Start a private context, the node and its spin thread."""
+        """
+        Start a private context, the node and its spin thread.
+
+        On the rig's domain: discovery.private_by_default, unless the environment chose.
+        """
+        private_by_default(os.environ)
         self._context = Context()
         rclpy.init(context=self._context)
         super().__init__(name, context=self._context)

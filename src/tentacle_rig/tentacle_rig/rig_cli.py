@@ -15,10 +15,11 @@ with one MCAP file). Play with ``scripts/rig-command play``. Each node is its ow
 its output in ``--logs``. Ctrl-C (or SIGTERM) stops the player first, then the drivers, each
 confirming its safe state (supplies at zero and off, axes stopped), then the tracker, the
 recorder (its bag closed and readable) and the simulator; further Ctrl-C only say that the
-stop goes on. If a node dies on its own the rig is stopped the
-same way. DDS discovery stays on this machine (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST)
-unless the environment sets it: set ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET (and a
-ROS_DOMAIN_ID of the lab's) to let other machines see and command the rig.
+stop goes on. If a node dies on its own the rig is stopped the same way. DDS stays private
+(tentacle_common.discovery): ROS_DOMAIN_ID 57 and discovery on this machine only
+(ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST) unless the environment sets them: set
+ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET and a ROS_DOMAIN_ID of the lab's to let other machines
+see and command the rig.
 
 Exit status: 0 when every driver confirmed its safe stop; 1 when one did not, or a node
 died; 2 for a usage error or a rig that did not come up.
@@ -62,18 +63,6 @@ def build_parser():
     return parser
 
 
-def discovery_note(environ):
-    """Set LOCALHOST discovery unless the environment chose; return the line saying so."""
-    if 'ROS_AUTOMATIC_DISCOVERY_RANGE' not in environ:
-        environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-        how = ('this machine only (to open it: ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET '
-               'scripts/rig ...)')
-    else:
-        how = 'as the environment sets it'
-    return (f"rig: DDS discovery {environ['ROS_AUTOMATIC_DISCOVERY_RANGE']}, "
-            f"ROS_DOMAIN_ID {environ.get('ROS_DOMAIN_ID', '0')}: {how}")
-
-
 def table_of(opts, parser):
     """Return the process table the options ask for (a usage error if they do not fit)."""
     from tentacle_rig import bringup
@@ -100,6 +89,7 @@ def main(args=None):
     """Bring the rig up, wait for Ctrl-C or a death, bring it down; return the exit code."""
     parser = build_parser()
     opts = parser.parse_args(args)
+    from tentacle_common.discovery import private_by_default
     from tentacle_planner.errors import PlanInputError
     from tentacle_rig.bringup import Rig, RigError
     from tentacle_sim.params import DEFAULT_DEVICE_DIR
@@ -108,7 +98,7 @@ def main(args=None):
     except (FileNotFoundError, PlanInputError) as exc:
         print(f'rig: {exc}', file=sys.stderr)
         return USAGE_EXIT
-    print(discovery_note(os.environ), flush=True)
+    print(f'rig: {private_by_default(os.environ)}', flush=True)
     if opts.sim:   # a background of another scene would be taken for this one's
         stale = pathlib.Path(opts.device_dir or DEFAULT_DEVICE_DIR) / 'background.png'
         stale.unlink(missing_ok=True)

@@ -16,12 +16,10 @@ import time
 
 import numpy as np
 import pytest
+from plans import short_duct
 from rig_support import ROOT, wait_for
 from tentacle_common import contract
 from tentacle_planner import paths
-from tentacle_planner.planner import plan_scene
-from tentacle_planner.scene import load_scene
-from tentacle_planner.schedule_writer import write_schedule_file
 from tentacle_rig.bringup import Rig, run_entries, sim_table
 from tentacle_rig.commander_node import Outcome, RigCommander
 from tentacle_rig.recording import read_bag
@@ -39,15 +37,7 @@ RESULTS = {}                 # what one test measured and a later one compares w
 @pytest.fixture(scope='module')
 def schedule(tmp_path_factory):
     """Return (scene file, schedule file): the duct's first 8 mm, planned quickly."""
-    folder = tmp_path_factory.mktemp('navigation_plan')
-    document = yaml.safe_load((ROOT / 'config/scenes/pancreatic_duct.yaml').read_text())
-    document.update(name='pancreatic_duct_8mm', insertion_steps_m=[s * 1e-3 for s in STEPS_MM],
-                    tentacle=str(ROOT / 'config/tentacles/braided_chapter5.yaml'))
-    scene_file = folder / 'pancreatic_duct_8mm.yaml'
-    scene_file.write_text(yaml.safe_dump(document))
-    result = plan_scene(load_scene(scene_file), starts=1, iterations=30)
-    assert not result.flags, result.flags
-    return scene_file, write_schedule_file(folder, result)
+    return short_duct(tmp_path_factory.mktemp('navigation_plan'), STEPS_MM)
 
 
 @pytest.fixture(scope='module')

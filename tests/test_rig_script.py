@@ -12,7 +12,10 @@ import threading
 import time
 
 import pytest
+from plans import short_duct
 from rig_support import ROOT, wait_for
+from tentacle_common import contract
+from tentacle_rig.recording import read_bag
 from tentacle_sim.emulator_client import EmulatorProcess, StageEmulatorProcess
 from tentacle_sim.sim_devices import ask
 import yaml
@@ -124,6 +127,31 @@ def test_sim_up_and_down_drivers_first_a_second_ctrl_c_waits(tmp_path, script):
     assert 'coils_node: outputs zero and off' in rig.text()
     assert 'inserter_node: axis stopped' in rig.text()
     assert not (tmp_path / 'dev' / 'coil_x').exists()   # the simulator went last, links too
+
+
+def test_a_run_played_from_the_command_line_is_recorded_and_ctrl_c_closes_it(tmp_path,
+                                                                             script):
+    scene, schedule = short_duct(tmp_path, (3,))
+    rig = script('rig', '--sim', scene, '--schedule', schedule, '--record', tmp_path / 'bags',
+                 '--device-dir', tmp_path / 'dev', '--logs', tmp_path / 'logs')
+    assert rig.up(), rig.text()
+    for args in (('home',), ('background',), ('play', '--mode', 'closed_loop')):
+        done = command(*args)
+        assert done.returncode == 0, done.stdout + done.stderr
+    assert 'step 3/3' in done.stdout and 'the run: done' in done.stdout
+    assert ask(tmp_path / 'dev', {'op': 'state'})['inserter']['position_m'] == pytest.approx(
+        0.003, abs=2e-5)
+    os.killpg(rig.popen.pid, signal.SIGINT)
+    assert rig.wait() == 0, rig.text()
+    order = rig.stopped_order()
+    assert order[0] == 'player_node' and order[-2:] == ['recorder_node', 'sim_node'], order
+    assert 'coils_node: outputs zero and off' in rig.text()
+    # The recording was closed whole: rosbag2's metadata, every step, the supplies' last word.
+    bag = read_bag(next((tmp_path / 'bags').iterdir()))
+    steps = [int(m.position[0]) for _, m in bag[contract.PLAYER_PROGRESS.name]]
+    assert steps[0] == 1 and steps[-1] == 3
+    currents = bag[contract.CURRENTS.name][-1][1].vector
+    assert max(abs(currents.x), abs(currents.y), abs(currents.z)) < 1e-3   # zero, first
 
 
 def test_a_node_that_dies_stops_the_rig_safely_and_says_so(tmp_path, script):

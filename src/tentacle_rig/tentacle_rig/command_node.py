@@ -4,41 +4,37 @@ scripts/rig-command: one command to a running rig (simulated or real), from a te
     scripts/rig-command field 0 0.010 0      # /coils/field_cmd, tesla, frame coils: held
                                              # (re-sent at 5 Hz) until Ctrl-C
     scripts/rig-command home                 # /inserter/home ("zero is here")
-    scripts/rig-command insert 0.030         # /inserter/target, metre
+    scripts/rig-command insert 0.030         # /inserter/target, metre: waits until there
     scripts/rig-command estop on|off         # /estop (latched)
     scripts/rig-command enable on|off        # /coils/enable
     scripts/rig-command background           # /vision/capture_background: the empty scene
+    scripts/rig-command play [SCHEDULE] [--mode closed_loop] [--retract]
+                                             # player_node: plays, prints progress
+    scripts/rig-command pause|resume|abort   # player_node: the run under way
     scripts/rig-command watch                # /sim/shape's tip, /vision/tip, /sim/contact
 
 Where a lab PC has ROS 2, ``ros2 topic pub`` and ``ros2 service call`` do the same; this is
-for the machines without the ros2 command line. Each command waits (with a deadline) until
-the rig has a subscriber or server for it, and says what it did. coils_node ramps the field
-to zero when no command came for ``watchdog_s`` (1 s): ``field`` therefore holds the field
-by sending it again at 5 Hz until Ctrl-C (``--once``: one command, gone after watchdog_s).
-``--axis backbone`` sends home and insert to the backbone stage. Exit 0 done, 1 the rig
-refused or did not answer, 2 a usage error.
+for the machines without the ros2 command line. It is tentacle_rig.commander_node's
+RigCommander, as a lab script would use it: every wait has a deadline, and the command says
+what happened. coils_node ramps the field to zero when no command came for ``watchdog_s``
+(1 s): ``field`` therefore holds the field until Ctrl-C (``--once``: set, then let go).
+Ctrl-C during ``play`` pauses the run (the field and the stage held where they are): then
+``resume`` or ``abort`` it. ``--axis backbone`` sends home and insert to the backbone
+stage. Exit 0 done, 1 the rig refused, did not answer, or the run paused or aborted, 2 a
+usage error.
 """
 
 import argparse
 import math
-import os
 import signal
 import sys
 import threading
-import time
 
-from geometry_msgs.msg import Vector3Stamped
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.signals import SignalHandlerOptions
-from std_msgs.msg import Bool, Float64
-from std_srvs.srv import SetBool, Trigger
 from tentacle_common import contract
-from tentacle_common.discovery import private_by_default
-from tentacle_common.driver_node import client, publisher, subscription
-from tentacle_common.waiting import wait_for
+from tentacle_common.driver_node import subscription
 
 DISCOVERY_S = 10.0   # how long to wait for the rig to be seen, by default
+MODES = ('open_loop', 'closed_loop', 'tip_angle')
 
 
 def build_parser():
@@ -53,7 +49,7 @@ def build_parser():
     for name in 'xyz':
         field.add_argument(f'b{name}', type=float, metavar=f'B{name.upper()}')
     field.add_argument('--once', action='store_true',
-                       help="one command (coils_node's watchdog ramps it down after 1 s)")
+                       help="set it, then let go (coils_node's watchdog ramps it down after 1 s)")
     sub.add_parser('home', help='make where the stage stands its zero')
     sub.add_parser('background', help="the tracker's next frame is the empty scene (call it "
                    'with nothing inserted)')
@@ -62,82 +58,16 @@ def build_parser():
     for name in ('estop', 'enable'):
         switch = sub.add_parser(name, help=f'{name} on or off')
         switch.add_argument('state', choices=('on', 'off'))
+    play = sub.add_parser('play', help='play a schedule with player_node (default: the one '
+                          'it was given)')
+    play.add_argument('schedule', nargs='?', help='a schedule file (tentacle-plan --out)')
+    play.add_argument('--mode', choices=MODES, help="the player's mode (default: as it is)")
+    play.add_argument('--retract', action='store_true', help='play it backwards')
+    for verb in ('pause', 'resume', 'abort'):
+        sub.add_parser(verb, help=f'{verb} the run under way')
     watch = sub.add_parser('watch', help='print the tip, truth and tracked, until Ctrl-C')
     watch.add_argument('--rate', type=float, default=2.0, help='lines per second')
     return parser
-
-
-def _publisher_seen(node, topic, wait_s):
-    """Return (publisher, None) once the rig subscribes to topic; (None, why) if it does not."""
-    pub = publisher(node, topic)
-    if not wait_for(lambda: pub.get_subscription_count() > 0, wait_s):
-        return None, f'no subscriber to {topic.name} in {wait_s:g} s: is the rig up?'
-    return pub, None
-
-
-def _published(node, topic, msg, wait_s):
-    pub, problem = _publisher_seen(node, topic, wait_s)
-    if problem:
-        return problem
-    pub.publish(msg)
-    time.sleep(0.2)   # let a reliable publication go out before the node goes away
-    return None
-
-
-def _called(node, srv, request, wait_s):
-    handle = client(node, srv)
-    if not handle.wait_for_service(timeout_sec=wait_s):
-        return False, f'no {srv.name} in {wait_s:g} s: is the rig up?'
-    future = handle.call_async(request)
-    rclpy.spin_until_future_complete(node, future, timeout_sec=60.0)
-    if not future.done():
-        return False, f'{srv.name}: no answer in 60 s'
-    return future.result().success, future.result().message
-
-
-def run(node, opts):
-    """Carry out one command; return (ok, what to say)."""
-    if opts.command == 'field':
-        b = (opts.bx, opts.by, opts.bz)
-        if not all(math.isfinite(v) for v in b):
-            return False, f'field {b}: three finite numbers, tesla'
-        msg = Vector3Stamped()
-        msg.header.stamp = node.get_clock().now().to_msg()
-        msg.header.frame_id = contract.COILS_FRAME
-        msg.vector.x, msg.vector.y, msg.vector.z = b
-        pub, problem = _publisher_seen(node, contract.FIELD_CMD, opts.wait_s)
-        if problem:
-            return False, problem
-        pub.publish(msg)
-        what = f'field [{", ".join(f"{v * 1e3:g}" for v in b)}] mT'
-        if opts.once:
-            time.sleep(0.2)
-            return True, f'{what} commanded once (coils_node logs a refusal)'
-        print(f'rig-command: holding {what} (re-sent at 5 Hz); Ctrl-C to stop', flush=True)
-        stop = until_ctrl_c()
-        while not stop.wait(0.2):
-            msg.header.stamp = node.get_clock().now().to_msg()
-            pub.publish(msg)
-        return True, f'stopped holding {what}: it ramps to zero within watchdog_s'
-    if opts.command == 'insert':
-        problem = _published(node, contract.axis_target(opts.axis),
-                             Float64(data=opts.position_m), opts.wait_s)
-        return problem is None, problem or (f'{opts.axis} target {opts.position_m:g} m sent '
-                                            '(inserter_node logs a refusal)')
-    if opts.command == 'estop':
-        problem = _published(node, contract.ESTOP, Bool(data=opts.state == 'on'),
-                             opts.wait_s)
-        return problem is None, problem or f'estop {opts.state}'
-    if opts.command == 'home':
-        return _called(node, contract.axis_service(opts.axis, 'home'), Trigger.Request(),
-                       opts.wait_s)
-    if opts.command == 'background':
-        return _called(node, contract.VISION_CAPTURE_BACKGROUND, Trigger.Request(),
-                       opts.wait_s)
-    if opts.command == 'enable':
-        return _called(node, contract.COILS_ENABLE, SetBool.Request(data=opts.state == 'on'),
-                       opts.wait_s)
-    return watch(node, opts.rate)
 
 
 def until_ctrl_c():
@@ -150,26 +80,80 @@ def until_ctrl_c():
     return stop
 
 
-def watch(node, rate_hz):
+def run(rig, opts):
+    """Carry out one command on a RigCommander; return (ok, what to say)."""
+    wait = opts.wait_s
+    if opts.command == 'field':
+        b = (opts.bx, opts.by, opts.bz)
+        if not all(math.isfinite(v) for v in b):
+            return False, f'field {b}: three finite numbers, tesla'
+        what = f'field [{", ".join(f"{v * 1e3:g}" for v in b)}] mT'
+        stop = until_ctrl_c()
+        result = rig.set_field(b, timeout_s=wait)
+        if not result or opts.once:
+            rig.release_field()
+            return bool(result), f'{what}: {result.message}'
+        print(f'rig-command: holding {what} (re-sent at 5 Hz); Ctrl-C to stop', flush=True)
+        stop.wait()
+        rig.release_field()
+        return True, f'stopped holding {what}: it ramps to zero within watchdog_s'
+    simple = {'insert': lambda: rig.move_axis(opts.axis, opts.position_m),
+              'home': lambda: rig.home(opts.axis, wait),
+              'background': lambda: rig.capture_background(max(wait, 20.0)),
+              'estop': lambda: rig.estop(opts.state == 'on', wait),
+              'enable': lambda: rig.enable_coils(opts.state == 'on', wait),
+              'pause': lambda: rig.player('pause', wait),
+              'resume': lambda: rig.player('resume', wait),
+              'abort': lambda: rig.player('abort', wait)}
+    if opts.command in simple:
+        result = simple[opts.command]()
+        return bool(result), result.message or result.outcome.value
+    if opts.command == 'play':
+        return play(rig, opts)
+    return watch(rig, opts.rate)
+
+
+def play(rig, opts):
+    """Play a schedule, printing progress; Ctrl-C pauses the run."""
+    stop = until_ctrl_c()
+    params = {'mode': opts.mode} if opts.mode else {}
+    if opts.schedule:
+        params['schedule'] = opts.schedule
+    for check in (lambda: rig.wait_for_player(opts.wait_s),
+                  lambda: rig.set_player(**params) if params else True,
+                  lambda: rig.player('retract' if opts.retract else 'start')):
+        result = check()
+        if not result:
+            return False, result.message
+    outcome = []
+
+    def printed(p):
+        print(f'rig-command: step {p.step}/{p.steps}: {p.inserted_m * 1e3:.1f} mm inserted, '
+              f'tracked shape {p.shape_rms_m * 1e3:.2f} mm RMS', flush=True)
+    waiter = threading.Thread(target=lambda: outcome.append(
+        rig.wait_for_run(24 * 3600.0, printed)), daemon=True)
+    waiter.start()
+    while waiter.is_alive() and not stop.wait(0.1):
+        pass
+    if not outcome:
+        paused = rig.player('pause', opts.wait_s)
+        return False, (f'Ctrl-C: {paused.message}: rig-command resume, or abort'
+                       if paused else f'Ctrl-C: the pause was not confirmed: {paused.message}')
+    return bool(outcome[0]), f'the run: {outcome[0].outcome.value}: {outcome[0].message}'
+
+
+def watch(rig, rate_hz):
     """Print the latest truth, tracked tip and contact until Ctrl-C."""
     stop = until_ctrl_c()
-    executor = SingleThreadedExecutor(context=node.context)
-    executor.add_node(node)
     latest = {}
-    subscription(node, contract.SIM_SHAPE, lambda m: latest.__setitem__('shape', m))
-    subscription(node, contract.VISION_TIP, lambda m: latest.__setitem__('tip', m))
-    subscription(node, contract.SIM_CONTACT, lambda m: latest.__setitem__('contact', m))
-    subscription(node, contract.FIELD, lambda m: latest.__setitem__('field', m))
-    next_at = time.monotonic()
-    while not stop.is_set():
-        executor.spin_once(timeout_sec=0.05)
-        if time.monotonic() < next_at:
-            continue
-        next_at += 1.0 / rate_hz
+    for key, topic in (('shape', contract.SIM_SHAPE), ('tip', contract.VISION_TIP),
+                       ('contact', contract.SIM_CONTACT)):
+        subscription(rig, topic, lambda m, k=key: latest.__setitem__(k, m))
+    while not stop.wait(1.0 / rate_hz):
         parts = []
-        if 'field' in latest:
-            v = latest['field'].vector
-            parts.append(f'field [{v.x * 1e3:6.2f} {v.y * 1e3:6.2f} {v.z * 1e3:6.2f}] mT')
+        field = rig.field_t()
+        if field is not None:
+            parts.append('field [' + ' '.join(f'{v * 1e3:6.2f}' for v in field) + '] mT')
         if 'shape' in latest and latest['shape'].poses:
             p = latest['shape'].poses[-1].pose.position
             parts.append(f'tip (truth) [{p.x * 1e3:6.2f} {p.y * 1e3:6.2f} {p.z * 1e3:6.2f}] mm')
@@ -180,26 +164,23 @@ def watch(node, rate_hz):
             count, depth = latest['contact'].position
             parts.append(f'contact {int(count)} ({depth * 1e3:.2f} mm)')
         print('  '.join(parts) or 'nothing heard yet', flush=True)
-    executor.shutdown()
     return True, 'stopped watching'
 
 
 def main(args=None):
-    """Parse, start rclpy, run the command; exit 0, 1 or 2."""
+    """Parse, start the RigCommander, run the command; exit 0, 1 or 2."""
     opts = build_parser().parse_args(args)
     if not contract.is_name_token(opts.axis):
         print(f'rig-command: --axis {opts.axis!r} is not one ROS name token', file=sys.stderr)
         sys.exit(2)
-    private_by_default(os.environ)   # the rig's domain, as scripts/rig sets it
-    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)   # Ctrl-C is ours
-    node = rclpy.create_node('rig_command')
+    from tentacle_rig.commander_node import RigCommander   # starts rclpy: after the usage
+    rig = RigCommander('rig_command')
     try:
-        ok, message = run(node, opts)
+        ok, message = run(rig, opts)
     except KeyboardInterrupt:   # while waiting for the rig or its answer
         ok, message = False, f'interrupted: {opts.command} not confirmed'
     finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+        rig.close()
     print(f'rig-command: {message}', file=sys.stdout if ok else sys.stderr)
     sys.exit(0 if ok else 1)
 

@@ -28,6 +28,7 @@ from geometry_msgs.msg import Vector3Stamped
 import numpy as np
 import rclpy
 from rclpy.context import Context
+from rclpy.duration import Duration
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -152,7 +153,8 @@ class RigCommander(Node):
         handle = client(self, srv)
         try:
             if not handle.wait_for_service(timeout_sec=timeout_s):
-                return Result(Outcome.TIMED_OUT, f'no {srv.name} in {timeout_s:g} s')
+                return Result(Outcome.TIMED_OUT, f'no {srv.name} in {timeout_s:g} s: is the '
+                              'rig up?')
             future = handle.call_async(request)
             if not self._wait(future.done, timeout_s):
                 return Result(Outcome.TIMED_OUT, f'{srv.name}: no answer in {timeout_s:g} s')
@@ -209,7 +211,8 @@ class RigCommander(Node):
         if self.field_pub is None:
             self.field_pub = publisher(self, contract.FIELD_CMD)
         if not self._wait(lambda: self.field_pub.get_subscription_count() > 0, timeout_s):
-            return Result(Outcome.TIMED_OUT, f'no subscriber to {contract.FIELD_CMD.name}')
+            return Result(Outcome.TIMED_OUT, f'no subscriber to {contract.FIELD_CMD.name} in '
+                          f'{timeout_s:g} s: is the rig up?')
         since = time.monotonic()
         self._held = field
         self._publish_field(field)
@@ -240,7 +243,8 @@ class RigCommander(Node):
             return Result(Outcome.REFUSED, f'{axis!r} is not one of {", ".join(self.target_pubs)}')
         pub = self.target_pubs[axis]
         if not self._wait(lambda: pub.get_subscription_count() > 0, min(timeout_s, 10.0)):
-            return Result(Outcome.TIMED_OUT, f'no {axis} node subscribes to its target')
+            return Result(Outcome.TIMED_OUT, f'no {axis} node subscribes to its target: is the '
+                          'rig up?')
         since = time.monotonic()
         pub.publish(Float64(data=float(position_m)))
 
@@ -270,8 +274,12 @@ class RigCommander(Node):
     def estop(self, on, timeout_s=5.0):
         """Publish the latched estop state once the rig subscribes to it."""
         if not self._wait(lambda: self.estop_pub.get_subscription_count() > 0, timeout_s):
-            return Result(Outcome.TIMED_OUT, f'no subscriber to {contract.ESTOP.name}')
+            return Result(Outcome.TIMED_OUT, f'no subscriber to {contract.ESTOP.name} in '
+                          f'{timeout_s:g} s: is the rig up?')
         self.estop_pub.publish(Bool(data=bool(on)))
+        if not self.estop_pub.wait_for_all_acked(Duration(seconds=timeout_s)):
+            return Result(Outcome.TIMED_OUT, f'estop {"on" if on else "off"} sent, not '
+                          f'acknowledged in {timeout_s:g} s')
         return Result(Outcome.DONE, f'estop {"on" if on else "off"}')
 
     def capture_background(self, timeout_s=20.0):

@@ -1,0 +1,24 @@
+"""Short plans for the tests that play them: the duct's first millimetres, planned quickly."""
+
+from rig_support import ROOT
+from tentacle_planner.planner import plan_scene
+from tentacle_planner.scene import load_scene
+from tentacle_planner.schedule_writer import write_schedule_file
+import yaml
+
+
+def short_duct(folder, steps_mm=(4, 8)):
+    """
+    Return (scene file, schedule file): the pancreatic duct to its last key step, planned.
+
+    Its stated mismatch kept; played every 1 mm (the scene's playback step).
+    """
+    document = yaml.safe_load((ROOT / 'config/scenes/pancreatic_duct.yaml').read_text())
+    document.update(name=f'pancreatic_duct_{steps_mm[-1]}mm',
+                    insertion_steps_m=[s * 1e-3 for s in steps_mm],
+                    tentacle=str(ROOT / 'config/tentacles/braided_chapter5.yaml'))
+    scene_file = folder / f'{document["name"]}.yaml'
+    scene_file.write_text(yaml.safe_dump(document))
+    result = plan_scene(load_scene(scene_file), starts=1, iterations=30)
+    assert not result.flags, result.flags
+    return scene_file, write_schedule_file(folder, result)

@@ -15,8 +15,8 @@ stall is played from where the estop left the body.
 import time
 
 import numpy as np
-import pytest
 from plans import short_duct
+import pytest
 from rig_support import ROOT, wait_for
 from tentacle_common import contract
 from tentacle_planner import paths

@@ -11,8 +11,8 @@ import subprocess
 import threading
 import time
 
-import pytest
 from plans import short_duct
+import pytest
 from rig_support import ROOT, wait_for
 from tentacle_common import contract
 from tentacle_rig.recording import read_bag

@@ -27,16 +27,20 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Vector3Stamped
+from nav_msgs.msg import Path
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter_client import AsyncParameterClient
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 from tentacle_common import contract, frames
+from tentacle_common.cdr import header_stamp_s
 from tentacle_common.driver_node import (client, declare_parameters, diagnostic_status,
-                                         publisher, run_node, service, subscription)
+                                         publisher, qos_profile, run_node, service,
+                                         subscription)
 from tentacle_common.errors import ConfigError
 from tentacle_model.model import TentacleModel
 from tentacle_model.tentacle_spec import load_tentacle, SpecError
@@ -118,7 +122,8 @@ class PlayerNode(Node):
         self._published_field, self._published_at, self._step_key = None, -math.inf, None
         self._frame_after_ros, self._last_loop = 0.0, -math.inf
         self._loop_converged, self._shape_at = False, -math.inf
-        self._latest_shape, self._abort_pending, self._others = None, False, []
+        self._shape_raw, self._shape_points = None, None
+        self._abort_pending, self._others = False, []
         self._phase = None
         self.figures = LoopFigures()
 
@@ -135,7 +140,10 @@ class PlayerNode(Node):
                          lambda msg, a=axis: self.on_state(a, msg))
         subscription(self, contract.ESTOP, self.on_estop)
         subscription(self, contract.DIAGNOSTICS, self.on_diagnostics)
-        subscription(self, contract.VISION_SHAPE, self.on_shape)
+        # Serialized: the loop reads a centreline's stamp first, and the poses only of the
+        # frames it takes (hundreds of poses at 30 Hz cost milliseconds each in Python).
+        self.create_subscription(Path, contract.VISION_SHAPE.name, self.on_shape,
+                                 qos_profile(contract.VISION_SHAPE.qos), raw=True)
         subscription(self, contract.VISION_TIP, self.on_tip)
         for verb in contract.PLAYER_VERBS:
             service(self, contract.player_service(verb),
@@ -362,21 +370,30 @@ class PlayerNode(Node):
         self._published_field, self._published_at = np.array(field_t, dtype=float), now
 
     # -- the closed loop ----------------------------------------------------------------
-    def _fresh(self, msg):
-        """Return whether a tracker message may drive a correction now."""
+    def _fresh(self, stamp_s):
+        """Return whether a frame taken at stamp_s (ROS time, s) may drive a correction now."""
         self._shape_at = time.monotonic()
         if not self.looping() or self.player.phase is not Phase.DWELL or self._loop_converged:
             return False
-        if _stamp_s(msg) < self._frame_after_ros:   # taken before the last command settled
+        if stamp_s < self._frame_after_ros:   # taken before the last command settled
             return False
         return time.monotonic() - self._last_loop >= 1.0 / self.loop['loop_rate']
 
-    def on_shape(self, msg):
+    def latest_shape(self):
+        """Return the latest tracked centreline (N, 2), workspace m, or None."""
+        if self._shape_points is None and self._shape_raw is not None:
+            msg = deserialize_message(self._shape_raw, Path)
+            self._shape_points = np.array([[p.pose.position.x, p.pose.position.y]
+                                           for p in msg.poses]).reshape(-1, 2)
+        return self._shape_points
+
+    def on_shape(self, raw):
         """Keep the tracked centreline; in closed_loop, correct the field from it."""
-        points = np.array([[p.pose.position.x, p.pose.position.y] for p in msg.poses])
-        self._latest_shape = points
-        if self.loop['mode'] != 'closed_loop' or not self._fresh(msg):
+        self._shape_raw, self._shape_points = raw, None
+        stamp = header_stamp_s(raw)
+        if self.loop['mode'] != 'closed_loop' or not self._fresh(stamp):
             return
+        points = self.latest_shape()
         planned = None
         if self.loop['reference'] == 'planned' and self.player.step.index > 0:
             planned = self.schedule.steps[self.player.step.index - 1].predicted_centreline_m
@@ -384,23 +401,23 @@ class PlayerNode(Node):
             if len(points) else points
         correction = self.controller.correct(self.player.step.inserted_m, self.player.field_t,
                                              seen, planned)
-        self._corrected(msg, correction)
+        self._corrected(stamp, correction)
 
     def on_tip(self, msg):
         """In tip_angle mode, correct the field from the tracked tip's heading."""
-        if self.loop['mode'] != 'tip_angle' or not self._fresh(msg):
+        if self.loop['mode'] != 'tip_angle' or not self._fresh(_stamp_s(msg)):
             return
         q = msg.pose.orientation
         heading = 2.0 * math.atan2(q.z, q.w)
         correction = self.tip_control.correct(self.player.step.inserted_m, self.player.field_t,
                                               heading)
-        self._corrected(msg, correction)
+        self._corrected(_stamp_s(msg), correction)
 
-    def _corrected(self, msg, correction):
+    def _corrected(self, stamp_s, correction):
         now = time.monotonic()
         self._last_loop = now
         self._loop_converged = correction.converged
-        latency = self.get_clock().now().nanoseconds * 1e-9 - _stamp_s(msg)
+        latency = self.get_clock().now().nanoseconds * 1e-9 - stamp_s
         if not correction.converged:
             self.apply(self.player.adjust_field(correction.field_t))
         self.figures.evaluated(now, self.player.index, latency, not correction.converged)
@@ -408,14 +425,15 @@ class PlayerNode(Node):
     # -- reports ------------------------------------------------------------------------
     def tracked_errors(self):
         """Return (shape RMS, tip error), m, of the latest tracked shape, or NaN."""
-        if self.player is None or self._latest_shape is None or len(self._latest_shape) < 2:
+        shape = self.latest_shape()
+        if self.player is None or shape is None or len(shape) < 2:
             return math.nan, math.nan
         inserted = self.player.step.inserted_m
         if inserted <= 0:
             return math.nan, math.nan
         inserted = min(inserted, self.path.length_m)
         along = np.linspace(0.0, inserted, REFERENCE_SAMPLES)
-        points = frames.coils_from_workspace(tracked_at(self._latest_shape, inserted, along),
+        points = frames.coils_from_workspace(tracked_at(shape, inserted, along),
                                              self.insertion_point)
         return paths.shape_error(points, self.path, inserted)
 

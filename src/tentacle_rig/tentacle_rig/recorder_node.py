@@ -50,6 +50,8 @@ class RecorderNode(Node):
                               f'{", ".join(IMAGE_FORMATS)}')
         out = p['out'] or f'/tmp/tentacle_rig/bags/{time.strftime("%Y%m%d-%H%M%S")}'
         topics = recorded_topics()
+        if p['image_rate'] <= 0:   # no frames: not even received (3 MB each, 30 a second)
+            topics = [t for t in topics if t.msg_type != 'sensor_msgs/msg/Image']
         try:
             self.recording = Recording(out, topics)
         except (FileExistsError, OSError) as exc:

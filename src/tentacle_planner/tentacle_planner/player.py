@@ -60,6 +60,7 @@ class Settings:
     speed_m_s: float = 0.005             # the stages' speed (a move's expected time)
     feedback_timeout_s: float = 1.0      # a reading older than this is a fault
     abort_on_fault: bool = False         # a fault aborts instead of pausing
+    max_correction_t: float = np.inf     # a closed loop's field off the plan's, per axis
 
 
 @dataclass
@@ -237,11 +238,20 @@ class Player:
         return self._command_step(now, self.index + 1, '')
 
     def adjust_field(self, field_t):
-        """Hold a corrected field for the step dwelling now (a closed loop); carried on."""
+        """
+        Hold a corrected field for the step dwelling now (a closed loop); carried on.
+
+        The correction stays within ``max_correction_t`` of the planned field on each axis
+        (the coils' largest change per step: a loop never moves the field further from the
+        plan than one step may), and the field within the coils' limits.
+        """
         if self.phase is not Phase.DWELL:
             return self.hold()
-        self.field_t = self.field_limit(np.asarray(field_t, dtype=float))
-        self.bias_t = self.field_t - self.step.field_t
+        limit = self.settings.max_correction_t
+        planned = self.step.field_t
+        wanted = np.clip(np.asarray(field_t, dtype=float) - planned, -limit, limit)
+        self.field_t = self.field_limit(planned + wanted)
+        self.bias_t = self.field_t - planned
         return Command(self.field_t, {})
 
     def _fault(self, now, reason, seen=None):

@@ -274,7 +274,8 @@ class PlayerNode(Node):
             dwell_s=q['dwell_s'], position_tolerance_m=q['position_tolerance'],
             field_tolerance_t=q['field_tolerance'], settle_timeout_s=q['settle_timeout_s'],
             speed_m_s=q['stage_speed'], feedback_timeout_s=q['feedback_timeout_s'],
-            abort_on_fault=q['on_fault'] == 'abort')
+            abort_on_fault=q['on_fault'] == 'abort',
+            max_correction_t=limits.max_field_change_t or np.inf)
         self.schedule, self.path = schedule, paths.Path(schedule.path_m, str(schedule.source))
         self.insertion_point = planned.base_position_m
         model = TentacleModel(planned, **schedule.model.as_options())

@@ -227,6 +227,10 @@ def test_a_closed_loop_correction_is_held_and_carried_to_the_next_steps():
     assert corrected.field_t == pytest.approx([0.0005, 0.002, 0.0])
     run(player, rig, 30.0, start_at=rig.seen.field_at)
     assert player.field_t == pytest.approx([0.0005, 0.009, 0.0])   # carried, and limited
+    player.phase = Phase.DWELL   # a loop asking for more than a step's change gets a step's
+    player.settings = Settings(max_correction_t=0.001)
+    assert player.adjust_field(player.step.field_t + [0.005, -0.003, 0.0]).field_t == \
+        pytest.approx(player.step.field_t + [0.001, -0.001, 0.0])
 
 
 def test_busy_keeps_a_step_dwelling():

@@ -115,6 +115,12 @@ def progress_steps(bag):
     return seen
 
 
+def started_to_step(commander, step):
+    """Start a run and wait until it plays a step (1-based)."""
+    assert commander.player('start')
+    assert wait_for(lambda: (p := commander.progress()) is not None and p.step >= step, 20.0)
+
+
 def back_to_start(commander, devices):
     """Abort whatever runs, zero field, nothing inserted: where every test begins."""
     commander.player('abort')
@@ -169,8 +175,7 @@ def test_the_closed_loop_corrects_the_field_and_cuts_the_shape_error(rig, record
 
 def test_a_paused_run_holds_the_field_and_the_stage_then_resumes(rig, recording):
     commander, devices, _ = rig
-    assert commander.player('start')
-    assert wait_for(lambda: (p := commander.progress()) is not None and p.step >= 3, 20.0)
+    started_to_step(commander, 3)
     assert commander.player('pause')
     held = commander.latest('field')
     time.sleep(0.5)   # past a move in flight: a pause lets it finish
@@ -192,8 +197,7 @@ def test_a_paused_run_holds_the_field_and_the_stage_then_resumes(rig, recording)
 
 def test_a_supply_lost_mid_run_pauses_it_and_an_abort_zeroes_it_once_back(rig, recording):
     commander, devices, _ = rig
-    assert commander.player('start')
-    assert wait_for(lambda: (p := commander.progress()) is not None and p.step >= 3, 20.0)
+    started_to_step(commander, 3)
     ask(devices, {'op': 'fault', 'port': 'coil_y', 'kind': 'disconnect', 'duration_s': 3.0})
     result = commander.wait_for_run(10.0)
     assert result.outcome is Outcome.PAUSED, result
@@ -228,8 +232,7 @@ def test_a_schedule_for_another_tentacle_or_over_the_limits_is_refused(rig, sche
 
 def test_another_publisher_of_the_field_command_pauses_the_run(rig):
     commander, devices, _ = rig
-    assert commander.player('start')
-    assert wait_for(lambda: (p := commander.progress()) is not None and p.step >= 2, 20.0)
+    started_to_step(commander, 2)
     with RigCommander('intruder') as intruder:
         intruder.set_field(np.zeros(3), timeout_s=1.0)
         result = commander.wait_for_run(10.0)
@@ -240,8 +243,7 @@ def test_another_publisher_of_the_field_command_pauses_the_run(rig):
 
 def test_an_estop_mid_run_pauses_it_and_the_supplies_go_to_zero(rig, recording):
     commander, devices, _ = rig
-    assert commander.player('start')
-    assert wait_for(lambda: (p := commander.progress()) is not None and p.step >= 3, 20.0)
+    started_to_step(commander, 3)
     assert commander.estop(True)
     try:
         result = commander.wait_for_run(10.0)
@@ -265,8 +267,7 @@ def test_an_estop_mid_run_pauses_it_and_the_supplies_go_to_zero(rig, recording):
 
 def test_a_stage_stall_mid_run_pauses_it_saying_where_the_stage_is(rig, recording):
     commander, devices, _ = rig
-    assert commander.player('start')
-    assert wait_for(lambda: (p := commander.progress()) is not None and p.step >= 2, 20.0)
+    started_to_step(commander, 2)
     ask(devices, {'op': 'fault', 'port': 'inserter', 'kind': 'stall', 'after_m': 0.0015})
     result = commander.wait_for_run(15.0)
     assert result.outcome is Outcome.PAUSED, result

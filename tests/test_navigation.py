@@ -202,6 +202,10 @@ def test_a_supply_lost_mid_run_pauses_it_and_an_abort_zeroes_it_once_back(rig, r
     result = commander.wait_for_run(10.0)
     assert result.outcome is Outcome.PAUSED, result
     assert 'supply y' in result.message or contract.FIELD.name in result.message, result
+    # Paused, a move in flight finishes: aborted at rest (as its driver reports it), the
+    # axis stays homed.
+    assert wait_for(lambda: not devices_state(devices)[1]['moving']
+                    and commander.latest('state:inserter').velocity[0] == 0.0, 5.0)
     assert commander.player('abort')
     # Out of the driver's reach the supply holds its current; once back, the driver zeroes it.
     assert wait_for(lambda: supplies_hold(devices, np.zeros(3), 1e-3), 20.0)

@@ -130,7 +130,7 @@ class Player:
         self.phase, self.index, self.reason = Phase.IDLE, 0, ''
         self.field_t = None            # the field held now, T
         self.bias_t = np.zeros(3)      # a closed loop's correction, carried to later steps
-        self._since = 0.0              # when the phase began
+        self.since = 0.0               # when the phase began (the player's clock, s)
         self._deadline = np.inf
         self._sent_at = 0.0            # when the step's field and targets were commanded
         self._targets = {}
@@ -163,7 +163,7 @@ class Player:
         step = self.step
         self.field_t = self.field_limit(step.field_t + self.bias_t)
         self._targets = dict(step.targets_m)
-        self._since = self._sent_at = now
+        self.since = self._sent_at = now
         self._deadline = now + self._expected_move_s() + self.settings.settle_timeout_s
         return Command(self.field_t, self._targets, said=[line] if line else [])
 
@@ -224,13 +224,13 @@ class Player:
         if self.phase is Phase.MOVING:
             missing = self.arrived(seen)
             if not missing:
-                self.phase, self._since = Phase.DWELL, now
+                self.phase, self.since = Phase.DWELL, now
             elif now > self._deadline:
                 return self._fault(now, f'step {self.step.index}: not there after '
                                         f'{now - self._sent_at:.1f} s: ' + '; '.join(missing),
                                    seen)
             return self.hold()
-        if now - self._since < self.settings.dwell_s or busy:
+        if now - self.since < self.settings.dwell_s or busy:
             return self.hold()
         if self.index + 1 >= len(self.steps):
             self.phase, self.index = Phase.DONE, len(self.steps)
@@ -258,7 +258,7 @@ class Player:
         if self.settings.abort_on_fault:
             command = self.abort(now, reason, seen)
         else:
-            self.phase, self.reason, self._since = Phase.PAUSED, reason, now
+            self.phase, self.reason, self.since = Phase.PAUSED, reason, now
             command = self.hold()
         command.said.append(f'{self.phase.value} at step {self.step.index}: {reason}')
         return command
@@ -267,7 +267,7 @@ class Player:
         """Hold the field and the stages where they are (a move in flight finishes)."""
         if not self.running:
             raise ValueError(f'nothing to pause: the run is {self.phase.value}')
-        self.phase, self.reason, self._since = Phase.PAUSED, reason, now
+        self.phase, self.reason, self.since = Phase.PAUSED, reason, now
         return Command(self.field_t, {}, said=[f'paused at step {self.step.index}: {reason}'])
 
     def resume(self, now, seen):
@@ -279,6 +279,18 @@ class Player:
             raise ValueError(f'not resumed: {fault}')
         return self._command_step(now, self.index, f'resumed at step {self.step.index}')
 
+    def release(self):
+        """
+        Stop commanding the field: once an aborted run's (or a retraction's) zero is read back.
+
+        The player then no longer publishes field commands, so another commander (a lab
+        script, rig-command) may take the coils without meeting the player's zero.
+        """
+        if self.phase not in (Phase.ABORTED, Phase.DONE) or self.field_t is None or \
+                np.any(self.field_t != 0.0):
+            raise ValueError('only a finished run at zero field lets go of the coils')
+        self.field_t = None
+
     def abort(self, now, reason='asked to', seen=None):
         """
         Command zero field and stop the stages that move; the run ends.
@@ -288,7 +300,7 @@ class Player:
         """
         moving = self.phase is Phase.MOVING or (seen is not None and any(
             abs(v) > self.settings.still_m_s for v in seen.velocities_m_s.values()))
-        self.phase, self.reason, self._since = Phase.ABORTED, reason, now
+        self.phase, self.reason, self.since = Phase.ABORTED, reason, now
         self.field_t = np.zeros(3)
         return Command(self.field_t, {}, stop_axes=moving,
                        said=[f'aborted at step {self.step.index}: {reason}'])

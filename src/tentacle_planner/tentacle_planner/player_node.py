@@ -123,7 +123,7 @@ class PlayerNode(Node):
         self._frame_after_ros, self._last_loop = 0.0, -math.inf
         self._loop_converged, self._shape_at = False, -math.inf
         self._shape_raw, self._shape_points = None, None
-        self._abort_pending, self._others = False, []
+        self._others = []
         self._phase = None
         self.figures = LoopFigures()
 
@@ -294,7 +294,7 @@ class PlayerNode(Node):
                 player = self.load(retract=verb == 'retract')
                 self.seen.faults = self.faults()
                 command = player.start(now, self.seen)
-                self.player, self._abort_pending = player, False
+                self.player = player
                 self.figures = LoopFigures()
                 command.said[0] += (f' ({"retracting" if verb == "retract" else "inserting"}'
                                     f' {self.schedule.source}, {self.loop["mode"]})')
@@ -307,7 +307,6 @@ class PlayerNode(Node):
                 command = self.player.resume(now, self.seen)
             else:
                 command = self.player.abort(now, seen=self.seen)
-                self._abort_pending = True
         except ValueError as exc:
             response.success, response.message = False, str(exc)
             self.get_logger().warning(f'/player/{verb}: {exc}')
@@ -328,11 +327,15 @@ class PlayerNode(Node):
             if self._phase is Phase.DWELL:   # frames before this may show the stage moving
                 self._frame_after_ros = max(self._frame_after_ros,
                                             self.get_clock().now().nanoseconds * 1e-9)
-        if self._abort_pending and self.seen.field_t is not None and \
+        finished_at_zero = self.player.phase in (Phase.ABORTED, Phase.DONE) and \
+            self.player.field_t is not None and not np.any(self.player.field_t)
+        if finished_at_zero and self.seen.field_t is not None and \
+                self.seen.field_at > self.player.since and \
                 np.abs(self.seen.field_t).max() <= self.p['field_tolerance']:
-            self._abort_pending = False
-            self.get_logger().info('aborted: the field reads zero ('
-                                   f'{np.abs(self.seen.field_t).max() * 1e3:.3f} mT)')
+            self.player.release()   # the coils are free for another commander
+            self.get_logger().info(f'{self.player.phase.value}: the field reads zero ('
+                                   f'{np.abs(self.seen.field_t).max() * 1e3:.3f} mT): no '
+                                   'longer commanding the coils')
 
     def apply(self, command):
         """Send a Command: the targets, the field (on change and at hold_rate), stops."""
@@ -489,7 +492,7 @@ class PlayerNode(Node):
 
     def shutdown(self):
         """Abort a run that still commands the rig; return the line said at exit."""
-        if self.player is None or self.player.phase in (Phase.IDLE, Phase.ABORTED):
+        if self.player is None or self.player.phase is Phase.IDLE or self.player.field_t is None:
             return 'no run commanding the rig'
         self.apply(self.player.abort(time.monotonic(), 'the player is stopping', self.seen))
         return 'run aborted: zero field commanded, moving stages stopped'

@@ -170,6 +170,10 @@ def test_abort_commands_zero_field_and_stops_a_stage_that_moves_only():
         rig.advance(rig.seen.field_at + 0.1, 0.1)
     rig.apply(player.abort(rig.seen.field_at, seen=rig.seen))
     assert rig.stops == 0 and np.all(rig.command_t == 0)   # at rest: left homed
+    player.release()   # zero read back: no longer a commander of the coils
+    assert player.hold().field_t is None
+    with pytest.raises(ValueError, match='only a finished run at zero field'):
+        started()[0].release()
 
 
 def test_the_estop_pauses_the_run_and_a_resume_is_refused_while_it_is_on():

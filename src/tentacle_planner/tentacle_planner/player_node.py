@@ -51,8 +51,9 @@ from tentacle_planner.player_params import (LOOP_PARAMS, MODES, NODE_NAME, PLAYE
                                             REFERENCES)
 from tentacle_planner.schedule_check import CoilLimits, field_refusals, tentacle_refusals
 from tentacle_planner.schedule_file import read_schedule
-from tentacle_planner.shape_control import (Gains, in_limits, REFERENCE_SAMPLES,
-                                            ShapeController, TipAngleController, tracked_at)
+from tentacle_planner.shape_control import (CoilingController, Gains, in_limits,
+                                            REFERENCE_SAMPLES, ShapeController,
+                                            TipAngleController, tracked_at)
 
 TICK_S = 0.01           # the player's clock tick, s
 DRIVER_PREFIXES = ('coils', 'inserter_node')   # /diagnostics statuses a run depends on
@@ -116,7 +117,8 @@ class PlayerNode(Node):
                 raise ConfigError(f'tentacle: {exc}') from None
         self.add_on_set_parameters_callback(self._on_set)
         self.seen, self.driver_status = Seen(), {}
-        self.player = self.schedule = self.controller = self.tip_control = None
+        self.player = self.schedule = None
+        self.controller = self.tip_control = self.coiling = None
         self.path = self.insertion_point = None
         self.coils_max_field = None
         self._published_field, self._published_at, self._step_key = None, -math.inf, None
@@ -182,7 +184,7 @@ class PlayerNode(Node):
                      tip_tolerance_rad=q['tip_tolerance'])
 
     def _apply_gains(self):
-        for controller in (self.controller, self.tip_control):
+        for controller in (self.controller, self.tip_control, self.coiling):
             if controller is not None:
                 controller.gains = self.gains()
 
@@ -233,10 +235,20 @@ class PlayerNode(Node):
             missing.append(contract.axis_state('inserter').name)
         return missing
 
+    def planned_centreline(self):
+        """Return the step under way's planned centreline (k, 3), coils m, or None."""
+        index = self.player.step.index if self.player is not None else 0
+        return self.schedule.steps[index - 1].predicted_centreline_m if index > 0 else None
+
     def looping(self):
         """Return whether a closed loop corrects the step under way."""
-        return self.loop['mode'] != 'open_loop' and self.player is not None and \
-            self.player.step.inserted_m >= self.loop['loop_min_inserted']
+        if self.loop['mode'] == 'open_loop' or self.player is None or \
+                self.player.step.inserted_m < self.loop['loop_min_inserted']:
+            return False
+        if self.loop['mode'] == 'coiling':   # eq. 6.10 up to coil_feedback_max, then open
+            planned = self.planned_centreline()
+            return planned is not None and self.coiling.active(planned)
+        return True
 
     # -- the run -----------------------------------------------------------------------
     def limits(self):
@@ -281,6 +293,7 @@ class PlayerNode(Node):
         model = TentacleModel(planned, **schedule.model.as_options())
         self.controller = ShapeController(model, self.path, limits, self.gains())
         self.tip_control = TipAngleController(self.path, limits, self.gains())
+        self.coiling = CoilingController(limits, self.gains(), self.loop['coil_feedback_max'])
         return Player(start, steps, settings, lambda b: in_limits(b, limits))
 
     def on_service(self, verb, response):
@@ -356,7 +369,7 @@ class PlayerNode(Node):
         key = (id(self.player), self.player.index) if self.player else None
         if key != self._step_key:
             self._step_key = key
-            for controller in (self.controller, self.tip_control):
+            for controller in (self.controller, self.tip_control, self.coiling):
                 if controller is not None:
                     controller.new_step()
             self._loop_converged = False
@@ -395,9 +408,14 @@ class PlayerNode(Node):
         """Keep the tracked centreline; in closed_loop, correct the field from it."""
         self._shape_raw, self._shape_points = raw, None
         stamp = header_stamp_s(raw)
-        if self.loop['mode'] != 'closed_loop' or not self._fresh(stamp):
+        if self.loop['mode'] not in ('closed_loop', 'coiling') or not self._fresh(stamp):
             return
         points = self.latest_shape()
+        if self.loop['mode'] == 'coiling':
+            seen = frames.coils_from_workspace(points, self.insertion_point)
+            self._corrected(stamp, self.coiling.correct(self.planned_centreline(),
+                                                        self.player.field_t, seen))
+            return
         planned = None
         if self.loop['reference'] == 'planned' and self.player.step.index > 0:
             planned = self.schedule.steps[self.player.step.index - 1].predicted_centreline_m

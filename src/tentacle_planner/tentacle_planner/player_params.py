@@ -11,7 +11,7 @@ import math
 from tentacle_common.params import Param
 
 NODE_NAME = 'player_node'
-MODES = ('open_loop', 'closed_loop', 'tip_angle')
+MODES = ('open_loop', 'closed_loop', 'tip_angle', 'coiling')
 REFERENCES = ('path', 'planned')
 
 PLAYER_PARAMS = (
@@ -51,7 +51,9 @@ LOOP_PARAMS = (
     Param('schedule', '', 'the schedule file to play (tentacle-plan --out DIR writes '
           'DIR/schedule.yaml); read at every start'),
     Param('mode', 'open_loop', 'open_loop (the schedule as planned), closed_loop (the '
-          'tracked shape corrects the field) or tip_angle (thesis eq. 6.10 on the tip heading)'),
+          'tracked shape corrects the field), tip_angle (thesis eq. 6.10 on the tip heading) '
+          "or coiling (chapter 6: eq. 6.10 on how far the body turns, the step's planned "
+          'turn the target, up to coil_feedback_max; open loop beyond)'),
     Param('reference', 'path', 'closed_loop follows: path (the desired path, as the shape '
           "error is measured) or planned (the step's planned centreline)"),
     Param('loop_min_inserted', 0.003, 'the loop acts from this inserted length on (shorter, '
@@ -68,7 +70,10 @@ LOOP_PARAMS = (
     Param('max_iterations', 8, 'corrections per step at most', 0, 1000),
     Param('stall_ratio', 0.9, 'closed_loop: converged too once a correction cut the error by '
           'less than this factor', 0.0, 1.0),
-    Param('tip_gain', 0.5, "tip_angle: eq. 6.10's K_P", 0.0, 5.0),
-    Param('tip_tolerance', math.radians(5.0), 'tip_angle: converged below this tip angle '
-          'error, radian', 0.0, math.pi),
+    Param('tip_gain', 0.5, "tip_angle, coiling: eq. 6.10's K_P", 0.0, 5.0),
+    Param('tip_tolerance', math.radians(5.0), 'tip_angle, coiling: converged below this tip '
+          'angle error, radian', 0.0, math.pi),
+    Param('coil_feedback_max', math.radians(220.0), 'coiling: the feedback ends where a step '
+          'is planned to turn further (the tip closes the coil, out of sight), radian', 0.0,
+          4.0 * math.pi),
 )

@@ -183,6 +183,27 @@ def wrapped(angle_rad):
     return math.atan2(math.sin(angle_rad), math.cos(angle_rad))
 
 
+def turning_rad(points):
+    """
+    Return how far a polyline (N, 2+) turns from its first segment to its last, rad.
+
+    About z, unwrapped: each turn between neighbouring segments in (-pi, pi], summed, so a
+    coil past a full turn says more than 2 pi.
+    """
+    d = np.diff(np.asarray(points, dtype=float)[:, :2], axis=0)
+    headings = np.arctan2(d[:, 1], d[:, 0])[np.hypot(d[:, 0], d[:, 1]) > 0]
+    return float(np.sum(np.angle(np.exp(1j * np.diff(headings)))))
+
+
+def turned_field(field_t, turn_rad, limits):
+    """Return a field turned in the x-y plane by an angle (rad): |B| in-plane kept, Bz kept."""
+    field = np.asarray(field_t, dtype=float)
+    magnitude = math.hypot(field[0], field[1])
+    angle = math.atan2(field[1], field[0]) + turn_rad
+    return in_limits([magnitude * math.cos(angle), magnitude * math.sin(angle), field[2]],
+                     limits)
+
+
 class TipAngleController:
     """Thesis eq. 6.10: theta_act(t) = K_P theta_err(t) + theta_act(t - 1), |B| fixed."""
 
@@ -207,13 +228,46 @@ class TipAngleController:
 
         :param tip_heading_rad: the tracked tip's heading, rad about z (/vision/tip)
         """
+        return self.law(field_t, wrapped(self.desired_rad(inserted_m) - tip_heading_rad))
+
+    def law(self, field_t, error_rad):
+        """Return eq. 6.10's Correction for a tip angle error (desired - measured), rad."""
         g = self.gains
         field = np.asarray(field_t, dtype=float)
-        error = wrapped(self.desired_rad(inserted_m) - tip_heading_rad)
-        if abs(error) <= g.tip_tolerance_rad or self.iterations >= g.max_iterations:
-            return Correction(field, error, True, self.iterations)
+        if abs(error_rad) <= g.tip_tolerance_rad or self.iterations >= g.max_iterations:
+            return Correction(field, error_rad, True, self.iterations)
         self.iterations += 1
-        magnitude = math.hypot(field[0], field[1])
-        angle = math.atan2(field[1], field[0]) + g.tip_gain * error
-        turned = np.array([magnitude * math.cos(angle), magnitude * math.sin(angle), field[2]])
-        return Correction(in_limits(turned, self.limits), error, False, self.iterations)
+        return Correction(turned_field(field, g.tip_gain * error_rad, self.limits), error_rad,
+                          False, self.iterations)
+
+
+class CoilingController(TipAngleController):
+    """
+    Thesis chapter 6's coiling: eq. 6.10 on how far the body has turned, then open loop.
+
+    The desired angle is how far the step's planned centreline turns from base to tip, the
+    measured one how far the tracked centreline does (both unwrapped: a coil passes 180
+    deg). Beyond ``feedback_max_rad`` (220 deg in the thesis: past it the tip closes the
+    circle and is lost to the camera) the step is played open loop, as planned.
+    """
+
+    def __init__(self, limits, gains=None, feedback_max_rad=math.radians(220.0)):
+        """Fix the limits, the gains and where the feedback ends."""
+        super().__init__(None, limits, gains)
+        self.feedback_max_rad = feedback_max_rad
+
+    def active(self, planned_m):
+        """Return whether a step with this planned centreline is closed by the feedback."""
+        return abs(turning_rad(planned_m)) <= self.feedback_max_rad
+
+    def correct(self, planned_m, field_t, seen_m):
+        """
+        Return the Correction of a step: eq. 6.10 while active, else the field as it is.
+
+        :param planned_m: (k, 2+) the step's planned centreline, base to tip
+        :param seen_m: (N, 2+) the tracked centreline, base to tip, the same frame
+        """
+        error = turning_rad(planned_m) - turning_rad(seen_m)
+        if not self.active(planned_m):
+            return Correction(np.asarray(field_t, dtype=float), error, True, self.iterations)
+        return self.law(field_t, error)

@@ -15,8 +15,9 @@ from tentacle_model.tentacle_spec import load_tentacle
 from tentacle_planner.mismatch import Mismatch
 from tentacle_planner.paths import Path, shape_error
 from tentacle_planner.schedule_check import CoilLimits
-from tentacle_planner.shape_control import (at_arc_lengths, Gains, in_limits, ShapeController,
-                                            TipAngleController)
+from tentacle_planner.shape_control import (at_arc_lengths, CoilingController, Gains,
+                                            in_limits, ShapeController, TipAngleController,
+                                            turning_rad)
 
 ROOT = pathlib.Path(__file__).resolve().parents[3]
 SPEC = load_tentacle(ROOT / 'config' / 'tentacles' / 'braided_chapter5.yaml')
@@ -108,3 +109,33 @@ def test_the_tip_angle_law_turns_the_field_by_kp_times_the_error():
         [0.010 * math.cos(math.pi / 8), 0.010 * math.sin(math.pi / 8), 0.002])
     done = control.correct(0.03, field, tip_heading_rad=math.radians(42.0))
     assert done.converged and np.array_equal(done.field_t, field)   # within 5 deg
+
+
+def arc(turn_deg, radius_m=0.0075, straight_m=0.01, points=200):
+    """Return a straight run then an arc turning by turn_deg (to +y), as chapter 6's coil."""
+    phi = np.radians(np.linspace(0.0, turn_deg, points))
+    bend = np.column_stack([straight_m + radius_m * np.sin(phi), radius_m * (1 - np.cos(phi))])
+    return np.vstack([[[0.0, 0.0]], bend])
+
+
+@pytest.mark.parametrize('turn_deg', [30.0, 179.0, 181.0, 267.0, 400.0])
+def test_turning_is_unwrapped_past_half_and_full_turns(turn_deg):
+    half_chord = turn_deg / 199 / 2   # the last chord lags the tangent by half its angle
+    assert np.degrees(turning_rad(arc(turn_deg))) == pytest.approx(turn_deg - half_chord)
+    mirrored = arc(turn_deg)[:, ::-1]   # x and y swapped: the same coil the other way round
+    assert np.degrees(turning_rad(mirrored)) == pytest.approx(-(turn_deg - half_chord))
+
+
+def test_coiling_closes_the_tip_angle_until_220_deg_then_plays_open_loop():
+    control = CoilingController(LIMITS, Gains(tip_gain=0.5))
+    field = np.array([0.0, 0.020, 0.0])
+    behind = control.correct(arc(200.0), field, seen_m=arc(180.0))
+    assert not behind.converged   # 20 deg behind (less their last chords' half-angles):
+    assert np.degrees(behind.error_m) == pytest.approx(20.0 - (200 - 180) / 199 / 2)
+    angle = np.degrees(np.arctan2(behind.field_t[1], behind.field_t[0]))
+    assert angle == pytest.approx(90.0 + 0.5 * np.degrees(behind.error_m))   # K_P x error
+    assert np.linalg.norm(behind.field_t) == pytest.approx(0.020)
+    close = control.correct(arc(200.0), field, seen_m=arc(197.0))
+    assert close.converged                                  # within 5 deg
+    past = control.correct(arc(267.0), field, seen_m=arc(180.0))   # the tip closes the coil
+    assert past.converged and np.array_equal(past.field_t, field)  # open loop: as planned

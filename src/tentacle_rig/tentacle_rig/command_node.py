@@ -32,9 +32,9 @@ import threading
 
 from tentacle_common import contract
 from tentacle_common.driver_node import subscription
+from tentacle_planner.player_params import MODES
 
 DISCOVERY_S = 10.0   # how long to wait for the rig to be seen, by default
-MODES = ('open_loop', 'closed_loop', 'tip_angle')
 
 
 def build_parser():

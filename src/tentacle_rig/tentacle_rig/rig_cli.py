@@ -33,6 +33,8 @@ import sys
 import threading
 import time
 
+from tentacle_planner.player_params import MODES
+
 USAGE_EXIT, UNSAFE_EXIT = 2, 1
 ROOT = pathlib.Path(__file__).resolve().parents[3]
 
@@ -54,7 +56,7 @@ def build_parser():
                         help='--sim: a sim_node parameter (repeatable), e.g. camera_rate:=15')
     parser.add_argument('--schedule', metavar='FILE', help='run player_node for this schedule '
                         '(tentacle-plan --out DIR writes DIR/schedule.yaml)')
-    parser.add_argument('--mode', choices=('open_loop', 'closed_loop', 'tip_angle'),
+    parser.add_argument('--mode', choices=MODES,
                         help="--schedule: the player's mode (default its params file's)")
     parser.add_argument('--record', metavar='DIR', help='record the session into '
                         'DIR/<date-time> (rosbag2, MCAP)')

@@ -293,7 +293,9 @@ class PlayerNode(Node):
         model = TentacleModel(planned, **schedule.model.as_options())
         self.controller = ShapeController(model, self.path, limits, self.gains())
         self.tip_control = TipAngleController(self.path, limits, self.gains())
-        self.coiling = CoilingController(limits, self.gains(), self.loop['coil_feedback_max'])
+        direction = planned.base_rotation[:, 0]   # the insertion direction, frame coils
+        self.coiling = CoilingController(limits, self.gains(), self.loop['coil_feedback_max'],
+                                         math.atan2(direction[1], direction[0]))
         return Player(start, steps, settings, lambda b: in_limits(b, limits))
 
     def on_service(self, verb, response):

@@ -22,6 +22,7 @@ import numpy as np
 from scipy.optimize import lsq_linear
 
 REFERENCE_SAMPLES = 20  # points along the body where tracked and desired are compared
+CHORD_M = 0.0025        # coiling: a body's turn over 2.5 mm chords (pixel noise at the tip)
 
 
 @dataclass
@@ -183,15 +184,28 @@ def wrapped(angle_rad):
     return math.atan2(math.sin(angle_rad), math.cos(angle_rad))
 
 
-def turning_rad(points):
+def turning_rad(points, start_heading_rad=None, chord_m=None):
     """
     Return how far a polyline (N, 2+) turns from its first segment to its last, rad.
 
     About z, unwrapped: each turn between neighbouring segments in (-pi, pi], summed, so a
     coil past a full turn says more than 2 pi.
+
+    :param start_heading_rad: the direction it starts from (the insertion direction), in
+        place of its first segment's: a tracked centreline's first pixels may step sideways
+    :param chord_m: take the polyline in chords this long, counted back from its end (the
+        last a whole chord): a centreline traced through pixels turns by its jitter from
+        one short segment to the next, and its last segment may be a fraction of a pixel
     """
-    d = np.diff(np.asarray(points, dtype=float)[:, :2], axis=0)
+    points = np.asarray(points, dtype=float)[:, :2]
+    if chord_m is not None:
+        length = arc_lengths(points)[-1]
+        points = at_arc_lengths(points, np.unique(np.clip(
+            length - np.arange(0.0, length + chord_m, chord_m)[::-1], 0.0, length)))
+    d = np.diff(points, axis=0)
     headings = np.arctan2(d[:, 1], d[:, 0])[np.hypot(d[:, 0], d[:, 1]) > 0]
+    if start_heading_rad is not None:
+        headings = np.concatenate([[start_heading_rad], headings])
     return float(np.sum(np.angle(np.exp(1j * np.diff(headings)))))
 
 
@@ -251,14 +265,16 @@ class CoilingController(TipAngleController):
     circle and is lost to the camera) the step is played open loop, as planned.
     """
 
-    def __init__(self, limits, gains=None, feedback_max_rad=math.radians(220.0)):
-        """Fix the limits, the gains and where the feedback ends."""
+    def __init__(self, limits, gains=None, feedback_max_rad=math.radians(220.0),
+                 insertion_heading_rad=0.0):
+        """Fix the limits, the gains, where the feedback ends and the insertion direction."""
         super().__init__(None, limits, gains)
         self.feedback_max_rad = feedback_max_rad
+        self.start = insertion_heading_rad
 
     def active(self, planned_m):
         """Return whether a step with this planned centreline is closed by the feedback."""
-        return abs(turning_rad(planned_m)) <= self.feedback_max_rad
+        return abs(turning_rad(planned_m, self.start, CHORD_M)) <= self.feedback_max_rad
 
     def correct(self, planned_m, field_t, seen_m):
         """
@@ -267,7 +283,8 @@ class CoilingController(TipAngleController):
         :param planned_m: (k, 2+) the step's planned centreline, base to tip
         :param seen_m: (N, 2+) the tracked centreline, base to tip, the same frame
         """
-        error = turning_rad(planned_m) - turning_rad(seen_m)
+        error = turning_rad(planned_m, self.start, CHORD_M) - turning_rad(seen_m, self.start,
+                                                                          CHORD_M)
         if not self.active(planned_m):
             return Correction(np.asarray(field_t, dtype=float), error, True, self.iterations)
         return self.law(field_t, error)

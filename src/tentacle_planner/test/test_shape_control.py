@@ -130,8 +130,8 @@ def test_coiling_closes_the_tip_angle_until_220_deg_then_plays_open_loop():
     control = CoilingController(LIMITS, Gains(tip_gain=0.5))
     field = np.array([0.0, 0.020, 0.0])
     behind = control.correct(arc(200.0), field, seen_m=arc(180.0))
-    assert not behind.converged   # 20 deg behind (less their last chords' half-angles):
-    assert np.degrees(behind.error_m) == pytest.approx(20.0 - (200 - 180) / 199 / 2)
+    assert not behind.converged   # 20 deg behind (both over 2.5 mm chords: their lag cancels)
+    assert np.degrees(behind.error_m) == pytest.approx(20.0, abs=0.05)
     angle = np.degrees(np.arctan2(behind.field_t[1], behind.field_t[0]))
     assert angle == pytest.approx(90.0 + 0.5 * np.degrees(behind.error_m))   # K_P x error
     assert np.linalg.norm(behind.field_t) == pytest.approx(0.020)
@@ -139,3 +139,11 @@ def test_coiling_closes_the_tip_angle_until_220_deg_then_plays_open_loop():
     assert close.converged                                  # within 5 deg
     past = control.correct(arc(267.0), field, seen_m=arc(180.0))   # the tip closes the coil
     assert past.converged and np.array_equal(past.field_t, field)  # open loop: as planned
+
+
+def test_a_traced_centreline_turns_by_its_noise_unless_taken_in_chords():
+    rng = np.random.default_rng(3)
+    x = np.append(np.arange(0.0, 0.05, 3e-4), 0.05 + 2e-5)   # 0.3 mm bands, a sliver last
+    traced = np.column_stack([x, rng.normal(0.0, 2.5e-5, len(x))])   # half a pixel of jitter
+    assert abs(np.degrees(turning_rad(traced, 0.0))) > 10.0          # the sliver's direction
+    assert abs(np.degrees(turning_rad(traced, 0.0, 0.0025))) < 3.0   # over 2.5 mm chords

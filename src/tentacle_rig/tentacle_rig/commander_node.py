@@ -283,8 +283,18 @@ class RigCommander(Node):
         return Result(Outcome.DONE, f'estop {"on" if on else "off"}')
 
     def capture_background(self, timeout_s=20.0):
-        """Have the tracker take its next frame as the empty scene (nothing inserted)."""
-        return self._call(contract.VISION_CAPTURE_BACKGROUND, Trigger.Request(), timeout_s)
+        """
+        Have the tracker take its latest frame as the empty scene (nothing inserted).
+
+        Asked again while the tracker has no frame yet (a rig just up), until the deadline.
+        """
+        deadline = time.monotonic() + timeout_s
+        while True:
+            result = self._call(contract.VISION_CAPTURE_BACKGROUND, Trigger.Request(),
+                                max(deadline - time.monotonic(), 0.1))
+            if result or 'no frame yet' not in result.message or time.monotonic() > deadline:
+                return result
+            time.sleep(0.2)
 
     # -- the player -------------------------------------------------------------------------
     def set_player(self, timeout_s=10.0, **values):

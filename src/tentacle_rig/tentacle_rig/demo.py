@@ -119,7 +119,7 @@ def rig_step_time_s():
 def summary(mode, steps, figures, recording, out):
     """Return a mode's report.json entry."""
     from tentacle_rig.run_report import mean_shape_rms
-    durations = [s.duration_s for s in steps[:-1]]   # the last lasts until the recording ends
+    durations = [s.duration_s for s in steps if s.duration_s is not None]
     return {
         'mean_shape_rms_m': mean_shape_rms(steps),
         'recording': str(pathlib.Path(recording).relative_to(out)),

@@ -27,7 +27,7 @@ class StepOutcome:
     shape_rms_m: float
     tip_error_m: float
     contact_depth_m: float
-    duration_s: float
+    duration_s: float | None   # None for the last step: it lasts until the recording ends
     points_m: np.ndarray    # (k, 3) the body, frame coils
 
     def row(self):
@@ -68,7 +68,8 @@ def steps_of(bag, path):
     contacts = bag.get(contract.SIM_CONTACT.name, [])
     shape_times = np.array([t for t, _ in shapes], dtype=np.int64)
     out = []
-    for index, inserted, begin, end in step_spans(bag.get(contract.PLAYER_PROGRESS.name, [])):
+    spans = step_spans(bag.get(contract.PLAYER_PROGRESS.name, []))
+    for k, (index, inserted, begin, end) in enumerate(spans):
         last = int(np.searchsorted(shape_times, end, side='left')) - 1
         if inserted <= 0 or last < 0:
             continue
@@ -76,8 +77,8 @@ def steps_of(bag, path):
         rms, tip = paths.shape_error(body, path, min(inserted, path.length_m))
         depth = max((dict(zip(m.name, m.position)).get('depth', 0.0)
                      for t, m in contacts if begin <= t < end), default=0.0)
-        out.append(StepOutcome(index, inserted, rms, tip, float(depth), (end - begin) * 1e-9,
-                               body))
+        duration = (end - begin) * 1e-9 if k + 1 < len(spans) else None
+        out.append(StepOutcome(index, inserted, rms, tip, float(depth), duration, body))
     return out
 
 

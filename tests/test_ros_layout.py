@@ -114,8 +114,9 @@ def run_from_install(install, emulator_command, node_command, started, stopped):
     """
     Run an emulator and a node through ros2_run, and stop the node with SIGINT.
 
-    The node is stopped once it says ``started``; it must exit 0 saying ``stopped``. Both
-    are killed if anything hangs.
+    The node is stopped once it says ``started`` and that it runs (a SIGINT before it spins
+    would interrupt its construction, which is not what is tested here); it must exit 0
+    saying ``stopped``. Both are killed if anything hangs.
     """
     env = {k: os.environ[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')}
     emulator = sourced(install, f'{ROOT}/scripts/ros2_run {emulator_command}', env,
@@ -126,11 +127,13 @@ def run_from_install(install, emulator_command, node_command, started, stopped):
         node = sourced(install, f'exec {ROOT}/scripts/ros2_run {node_command}', env)
         lines = []
         deadline = time.monotonic() + 20
-        while time.monotonic() < deadline:
+
+        def up():   # said `started`, and spins: its signal handling is in place
+            text = ''.join(lines)
+            return started in text and ': running' in text
+        while time.monotonic() < deadline and not up():
             lines.append(node.stdout.readline())
-            if started in lines[-1]:
-                break
-        assert started in lines[-1], ''.join(lines)
+        assert up(), ''.join(lines)
         node.send_signal(signal.SIGINT)
         out, _ = node.communicate(timeout=20)
         assert node.returncode == 0, out

@@ -247,6 +247,11 @@ class RigCommander(Node):
                           'rig up?')
         since = time.monotonic()
         pub.publish(Float64(data=float(position_m)))
+        # One target, sent once: a process just started may see the node's subscription
+        # before the node has matched it back; a reliable sample is kept until acknowledged.
+        if not pub.wait_for_all_acked(Duration(seconds=min(timeout_s, 5.0))):
+            return Result(Outcome.TIMED_OUT, f'{axis} target not acknowledged by its node in '
+                          f'{min(timeout_s, 5.0):g} s')
 
         def there():
             msg = self.latest(f'state:{axis}', since)

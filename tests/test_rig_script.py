@@ -103,6 +103,10 @@ def test_sim_up_a_recorded_run_then_down_player_and_drivers_first(tmp_path, scri
         0.003, abs=2e-5)
     # Aborted, the player lets go of the coils once their zero reads back: a lab may drive.
     assert command('abort').returncode == 0
+    moved = command('insert', '0.005')
+    assert moved.returncode == 0, moved.stdout + moved.stderr
+    assert ask(tmp_path / 'dev', {'op': 'state'})['inserter']['position_m'] == pytest.approx(
+        0.005, abs=1e-5)
     holding = script('rig-command', 'field', '0', '0.005', '0')
     assert wait_for(lambda: ask(tmp_path / 'dev', {'op': 'state'})['coil_y'][
         'current_a'] == pytest.approx(0.005 / 1.07e-3, abs=0.02), 20.0), holding.text()

@@ -39,6 +39,7 @@ from tentacle_common import contract
 from tentacle_common.discovery import private_by_default
 from tentacle_common.driver_node import client, publisher, subscription
 
+COILS_NODE = 'coils_node'
 HOLD_PERIOD_S = 0.2     # a held field is sent again this often
 POLL_S = 0.01
 
@@ -149,6 +150,19 @@ class RigCommander(Node):
                 return value
             time.sleep(POLL_S)
 
+    def _matched(self, pub, node_name, timeout_s):
+        """
+        Wait until node_name subscribes to pub's topic and pub has matched every subscriber.
+
+        Any subscriber is not enough: recorder_node subscribes to the same commands, and a
+        sample acknowledged by the recorder alone may never reach the driver.
+        """
+        def ready():
+            subs = self.get_subscriptions_info_by_topic(pub.topic_name)
+            return any(s.node_name == node_name for s in subs) and \
+                pub.get_subscription_count() >= len(subs)
+        return self._wait(ready, timeout_s)
+
     def _call(self, srv, request, timeout_s):
         handle = client(self, srv)
         try:
@@ -210,9 +224,9 @@ class RigCommander(Node):
             return Result(Outcome.REFUSED, f'field {field_t!r}: three finite numbers, tesla')
         if self.field_pub is None:
             self.field_pub = publisher(self, contract.FIELD_CMD)
-        if not self._wait(lambda: self.field_pub.get_subscription_count() > 0, timeout_s):
-            return Result(Outcome.TIMED_OUT, f'no subscriber to {contract.FIELD_CMD.name} in '
-                          f'{timeout_s:g} s: is the rig up?')
+        if not self._matched(self.field_pub, COILS_NODE, timeout_s):
+            return Result(Outcome.TIMED_OUT, f'{COILS_NODE} does not subscribe to '
+                          f'{contract.FIELD_CMD.name} after {timeout_s:g} s: is the rig up?')
         since = time.monotonic()
         self._held = field
         self._publish_field(field)
@@ -242,13 +256,14 @@ class RigCommander(Node):
         if axis not in self.target_pubs:
             return Result(Outcome.REFUSED, f'{axis!r} is not one of {", ".join(self.target_pubs)}')
         pub = self.target_pubs[axis]
-        if not self._wait(lambda: pub.get_subscription_count() > 0, min(timeout_s, 10.0)):
-            return Result(Outcome.TIMED_OUT, f'no {axis} node subscribes to its target: is the '
-                          'rig up?')
+        node = contract.axis_node_name(axis)
+        if not self._matched(pub, node, min(timeout_s, 10.0)):
+            return Result(Outcome.TIMED_OUT, f'{node} does not subscribe to {pub.topic_name} '
+                          f'after {min(timeout_s, 10.0):g} s: is the rig up?')
         since = time.monotonic()
         pub.publish(Float64(data=float(position_m)))
-        # One target, sent once: a process just started may see the node's subscription
-        # before the node has matched it back; a reliable sample is kept until acknowledged.
+        # One target, sent once: the node may not yet have matched this publisher back; a
+        # reliable sample is kept until every matched reader (the node's among them) acks it.
         if not pub.wait_for_all_acked(Duration(seconds=min(timeout_s, 5.0))):
             return Result(Outcome.TIMED_OUT, f'{axis} target not acknowledged by its node in '
                           f'{min(timeout_s, 5.0):g} s')

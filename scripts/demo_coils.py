@@ -23,14 +23,13 @@ os.environ['PYTHONPATH'] = os.pathsep.join(SOURCES + [os.environ.get('PYTHONPATH
 os.environ.setdefault('ROS_DOMAIN_ID', str(200 + os.getpid() % 30))
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
-from geometry_msgs.msg import Vector3Stamped  # noqa: E402
 import numpy as np  # noqa: E402
-import rclpy  # noqa: E402
 
 from tentacle_coils.field_map import ActuationMap  # noqa: E402
 from tentacle_coils.params import REFERENCE_MATRIX_T_PER_A  # noqa: E402
 from tentacle_common import contract  # noqa: E402
-from tentacle_common.driver_node import publisher, subscription  # noqa: E402
+from tentacle_common.waiting import wait_for  # noqa: E402
+from tentacle_rig.commander_node import RigCommander  # noqa: E402
 from tentacle_sim.sim_rig import CoilRig  # noqa: E402
 
 
@@ -55,20 +54,14 @@ def main():
     print(f'demo: starting 3 emulated DXKDP supplies (9600 baud) and coils_node; '
           f'logs in {workdir}', flush=True)
     rig = CoilRig(workdir, ROOT / 'config' / 'coils.yaml', 'dxkdp', 9600, cwd=ROOT)
-    rclpy.init()
-    node = rclpy.create_node('coils_demo')
-    latest = {}
-    subscription(node, contract.CURRENTS, lambda m: latest.__setitem__('currents', m))
-    subscription(node, contract.FIELD, lambda m: latest.__setitem__('field', m))
-    pub = publisher(node, contract.FIELD_CMD)
+    commander = RigCommander('coils_demo', axes=())   # the lab's facade
+    commander.follow('currents', contract.CURRENTS)
     rows = []
     try:
-        deadline = time.monotonic() + 20.0
-        while time.monotonic() < deadline and not (
-                pub.get_subscription_count() and all(rig.emulators.outputs())):
-            rclpy.spin_once(node, timeout_sec=0.05)
-        if not all(rig.emulators.outputs()):
-            print('demo: coils_node did not come up; its log:\n' + rig.node.output())
+        up = commander.wait_for_coils(20.0)
+        if not (up and wait_for(lambda: all(rig.emulators.outputs()), 10.0)):
+            print(f'demo: coils_node did not come up ({up.message}); its log:\n'
+                  + rig.node.output())
             return 1
         print(f'demo: rotating {opts.amplitude_mt:g} mT in x-y (period {opts.period_s:g} s) '
               f'over 3 mT on z, {opts.rate:g} commands/s for {opts.seconds:g} s\n')
@@ -79,16 +72,10 @@ def main():
         next_print = 0.0
         while (t := time.monotonic() - t0) < opts.seconds:
             field = field_at(t, opts.amplitude_mt * 1e-3, opts.period_s, 3e-3)
-            msg = Vector3Stamped()
-            msg.header.stamp = node.get_clock().now().to_msg()
-            msg.header.frame_id = contract.COILS_FRAME
-            msg.vector.x, msg.vector.y, msg.vector.z = (float(v) for v in field)
-            pub.publish(msg)
-            step_end = t0 + t + 1.0 / opts.rate
-            while time.monotonic() < step_end:
-                rclpy.spin_once(node, timeout_sec=max(0.0, step_end - time.monotonic()))
+            commander.send_field(field)   # a stream: each command renews the last
+            time.sleep(max(0.0, t0 + t + 1.0 / opts.rate - time.monotonic()))
             told = rig.emulators.setpoints()
-            cur, fld = latest.get('currents'), latest.get('field')
+            cur, fld = commander.latest('currents'), commander.latest('field')
             measured = [cur.vector.x, cur.vector.y, cur.vector.z] if cur else [np.nan] * 3
             made = [fld.vector.x, fld.vector.y, fld.vector.z] if fld else [np.nan] * 3
             rows.append([t, *field, *told, *measured, *made])
@@ -100,13 +87,12 @@ def main():
                       + ' '.join(f'{v * 1e3:6.2f}' for v in made), flush=True)
         data = np.array(rows)
         hold = field_at(opts.seconds, opts.amplitude_mt * 1e-3, opts.period_s, 3e-3)
-        settled = hold_and_measure(node, pub, latest, hold)
+        settled = hold_and_measure(commander, hold)
         summarise(data, amap, rig, hold, settled)
         plot(data, amap, pathlib.Path(opts.out))
         return 0
     finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+        commander.close()
         code = rig.node.stop()
         state = rig.emulators.state()
         rig.emulators.stop()
@@ -116,18 +102,13 @@ def main():
             for n in 'xyz'))
 
 
-def hold_and_measure(node, pub, latest, field):
-    """Command one field for a second; return the field made by the measured currents (T)."""
-    t_end = time.monotonic() + 1.0
-    while time.monotonic() < t_end:
-        msg = Vector3Stamped()
-        msg.header.stamp = node.get_clock().now().to_msg()
-        msg.header.frame_id = contract.COILS_FRAME
-        msg.vector.x, msg.vector.y, msg.vector.z = (float(v) for v in field)
-        pub.publish(msg)
-        rclpy.spin_once(node, timeout_sec=0.05)
-    made = latest['field'].vector
-    return np.array([made.x, made.y, made.z])
+def hold_and_measure(commander, field):
+    """Hold one field for a second; return the field made by the measured currents (T)."""
+    commander.set_field(field, timeout_s=2.0)
+    time.sleep(1.0)
+    made = commander.field_t()
+    commander.release_field()
+    return made
 
 
 def summarise(data, amap, rig, hold, settled):

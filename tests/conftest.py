@@ -41,7 +41,7 @@ def coil_rig(tmp_path):
 @pytest.fixture
 def probe():
     """Return a ROS node in this process that talks to the rig (see rig_probe.py)."""
-    from rig_probe import RigProbe
-    handle = RigProbe()
+    from rig_probe import rig_probe
+    handle = rig_probe()
     yield handle
     handle.close()

@@ -38,7 +38,7 @@ import conftest  # noqa: E402,F401  (the root one: source paths, as for the test
 sys.path.insert(0, str(HERE))
 from rig_support import ROOT, wait_for  # noqa: E402  (before rclpy: the private domain)
 
-from rig_probe import RigProbe  # noqa: E402,I100  (imports rclpy: after rig_support)
+from rig_probe import rig_probe  # noqa: E402,I100  (imports rclpy: after rig_support)
 from tentacle_sim.pty_device import UNAPPLIED_FAULTS  # noqa: E402
 from tentacle_sim.sim_rig import CoilRig  # noqa: E402
 
@@ -99,7 +99,7 @@ class Streamer:
         while not self._stop.wait(1.0 / STREAM_HZ):
             if self.running.is_set():
                 self.latest = self.field_at(time.monotonic())
-                self.probe.command_field(self.latest)
+                self.probe.send_field(self.latest)
 
     def stop(self):
         """Stop the thread."""
@@ -115,9 +115,9 @@ class Rig:
         self.rig = CoilRig(workdir, ROOT / 'config' / 'coils.yaml', dialect, baud, (), ROOT,
                            slew_rate=SLEW_A_PER_S, **params)
         self.emulators, self.node = self.rig.emulators, self.rig.node
-        self.probe = RigProbe()
+        self.probe = rig_probe()
         self.stream = Streamer(self.probe)
-        if not (self.probe.wait_for_subscriber(20.0) and self.following(timeout_s=20.0)):
+        if not (self.probe.wait_for_coils(20.0) and self.following(timeout_s=20.0)):
             self.stop()
             raise RuntimeError(f'rig did not come up:\n{self.node.output()}')
 
@@ -261,8 +261,8 @@ class Evidence:
     def _counters(self, since):
         out = {}
         for axis in 'xyz':
-            status = self.rig.probe.supply_status(axis, since)
-            values = {kv.key: kv.value for kv in status.values} if status else {}
+            status = self.rig.probe.status(f'coils: supply {axis}', since)
+            values = status.values if status else {}
             out[axis] = {k: int(values[k]) for k in COUNTERS if k in values}
         return out
 
@@ -410,7 +410,7 @@ def bad_commands(rig, name):
     t0 = time.monotonic()
     bad = ([math.nan, 0, 0], [0, math.inf, 0], [0.5, 0, 0], [0, 0, -1.0])
     for k in range(500):
-        rig.probe.command_field(bad[k % 4], 'coils' if k % 5 else 'world')
+        rig.probe.send_field(bad[k % 4], 'coils' if k % 5 else 'world')
         time.sleep(0.002)
     out.detect_s = timed_log(rig, 'field command rejected', t0)
     out.safe_s = 0.0
@@ -436,7 +436,7 @@ def kill_bank(rig, name):
     t_safe = time.monotonic()
     time.sleep(0.5)
     t_enable = time.monotonic()
-    out.check(rig.probe.enable(True).success, '/coils/enable refused after the bank died')
+    out.check(rig.probe.enable_coils(True), '/coils/enable refused after the bank died')
     out.recover_s = timed(rig.following, t0, 8.0)
     # How soon is bench/coils_failover.py's figure: here, that it happens at all.
     out.check(out.safe_s is not None, 'not zero and off')
@@ -447,12 +447,9 @@ def kill_bank(rig, name):
 
 def bank_pid(probe, t):
     """Return the bank process id from the node's diagnostics after time t, or None."""
-    array = probe.latest(probe.diagnostics, t)
-    for status in (array.status if array else []):
-        for kv in status.values:
-            if kv.key == 'bank_pid':
-                return int(kv.value)
-    return None
+    status = probe.status('coils: bank', t)
+    pid = None if status is None else status.values.get('bank_pid')
+    return None if pid is None else int(pid)
 
 
 def stop_by(signals, expect='clean'):
@@ -503,7 +500,7 @@ def scpi_lost_set(rig, name):
     final_a = round(6e-3 / MATRIX[0], 4)  # what 'CURR' carries: 0.1 mA resolution
     rig.emulators.fault('x', 'no_reply', count=1, on_current_a=final_a)
     t0 = time.monotonic()
-    rig.probe.command_field([6e-3, 0.0, 3e-3])
+    rig.probe.send_field([6e-3, 0.0, 3e-3])
     out.detect_s = timed_log(rig, 'reports device holds', t0, 3.0)
     out.safe_s = out.recover_s = timed(
         lambda: rig.emulators.setpoints()[0] == final_a, t0, 3.0)

@@ -28,7 +28,7 @@ def expected_currents(field_t, matrix=REFERENCE):
 
 def ready(emulators, probe, timeout_s=15.0):
     """Wait until the node subscribes and has energised the outputs."""
-    assert probe.wait_for_subscriber(timeout_s), 'coils_node did not subscribe'
+    assert probe.wait_for_coils(timeout_s), 'coils_node did not subscribe'
     assert wait_for(lambda: all(emulators.outputs()), timeout_s), 'outputs not enabled'
 
 
@@ -38,7 +38,7 @@ def close_to(values, expected, atol):
 
 def drive(emulators, probe, field_t, atol=0.0051):
     """Command a field; return whether every supply came to its current (one count, 5 mA)."""
-    probe.command_field(field_t)
+    probe.send_field(field_t)
     return wait_for(lambda: close_to(emulators.setpoints(), expected_currents(field_t), atol))
 
 
@@ -48,15 +48,15 @@ def test_field_command_reaches_each_supply_and_field_agrees(coil_rig, probe, dia
     ready(emulators, probe)
     for field in ([5e-3, -8e-3, 3e-3], [-2e-3, 0.0, 12e-3]):
         currents = expected_currents(field)
-        probe.command_field(field)
+        probe.send_field(field)
         assert wait_for(lambda: close_to(emulators.setpoints(), currents, 0.0051)), (
             f'supplies hold {emulators.setpoints()}, expected {currents}')
         t_settled = time.monotonic() + 0.2  # ten L/R time constants of the emulated coil
         # /coils/field and /coils/currents are published together but arrive on their own
         # subscriptions: wait for both, not for one and then read the other.
-        assert wait_for(lambda: probe.latest(probe.fields, t_settled) is not None
-                        and probe.latest(probe.currents, t_settled) is not None)
-        msg = probe.latest(probe.fields, t_settled)
+        assert wait_for(lambda: probe.latest('field', t_settled) is not None
+                        and probe.latest('currents', t_settled) is not None)
+        msg = probe.latest('field', t_settled)
         assert msg.header.frame_id == contract.COILS_FRAME
         # Stamped with the reading's (wall-clock) time: in the past and recent. That it is the
         # reading's, not the publication's, test_coil_bank checks against the emulator's log.
@@ -65,7 +65,7 @@ def test_field_command_reaches_each_supply_and_field_agrees(coil_rig, probe, dia
         measured = [msg.vector.x, msg.vector.y, msg.vector.z]
         # 0.01 A readback resolution (dxkdp) times at most 1.07 mT/A.
         assert close_to(measured, field, 2e-5), f'/coils/field {measured} vs {field}'
-        cur = probe.latest(probe.currents, t_settled)
+        cur = probe.latest('currents', t_settled)
         assert close_to([cur.vector.x, cur.vector.y, cur.vector.z], currents, 0.02)
 
 
@@ -77,7 +77,7 @@ def test_cross_coupled_matrix_and_inverted_supply(coil_rig, probe):
     ready(emulators, probe)
     field = [4e-3, 6e-3, -5e-3]
     currents = expected_currents(field, matrix)
-    probe.command_field(field)
+    probe.send_field(field)
     wire = currents * [1, -1, 1]  # y is wired reversed: the wire carries the opposite sign
     assert wait_for(lambda: close_to(emulators.setpoints(), wire, 0.0051)), (
         f'{emulators.setpoints()} vs {wire}')
@@ -95,7 +95,7 @@ def test_rejected_commands_never_reach_the_wire_and_are_logged(coil_rig, probe):
            ([0, 0.03, 0], 'coils', 'exceeds max_field'),
            ([0.008, 0, 0], 'coils', 'exceeds max_current')]  # 15 A on x > 10 A
     for field, frame, _ in bad:
-        probe.command_field(field, frame)
+        probe.send_field(field, frame)
     assert wait_for(lambda: all(reason in node.output() for _, _, reason in bad)), (
         node.output())
     time.sleep(0.3)
@@ -108,7 +108,7 @@ def test_rejected_commands_never_reach_the_wire_and_are_logged(coil_rig, probe):
 def test_clamp_scales_an_over_limit_command(coil_rig, probe):
     emulators, node = coil_rig('dxkdp', 115200, clamp=True)
     ready(emulators, probe)
-    probe.command_field([0.044, 0.011, 0.0])  # twice max_field on x
+    probe.send_field([0.044, 0.011, 0.0])  # twice max_field on x
     scaled = expected_currents([0.022, 0.0055, 0.0])  # 41.5 A on x, within 42 A
     assert wait_for(lambda: close_to(emulators.setpoints(), scaled, 0.0051))
     assert 'clamped' in node.output()
@@ -117,7 +117,7 @@ def test_clamp_scales_an_over_limit_command(coil_rig, probe):
 def test_watchdog_ramps_to_zero(coil_rig, probe):
     emulators, node = coil_rig('dxkdp', 115200, watchdog_s=0.5)
     ready(emulators, probe)
-    probe.command_field([5e-3, 5e-3, 5e-3])
+    probe.send_field([5e-3, 5e-3, 5e-3])
     assert wait_for(lambda: emulators.setpoints()[0] > 9.0)
     t_last = time.monotonic()
     assert wait_for(lambda: emulators.setpoints() == [0.0, 0.0, 0.0], timeout_s=3.0)
@@ -129,23 +129,22 @@ def test_watchdog_ramps_to_zero(coil_rig, probe):
 def test_estop_and_enable(coil_rig, probe):
     emulators, node = coil_rig('dxkdp', 115200)
     ready(emulators, probe)
-    probe.command_field([3e-3, 3e-3, 3e-3])
+    probe.send_field([3e-3, 3e-3, 3e-3])
     assert wait_for(lambda: emulators.setpoints()[0] > 5.0)
     probe.estop(True)
     assert wait_for(lambda: emulators.setpoints() == [0.0] * 3 and not any(emulators.outputs()))
-    probe.command_field([3e-3, 3e-3, 3e-3])
+    probe.send_field([3e-3, 3e-3, 3e-3])
     assert wait_for(lambda: 'estop active' in node.output())
     assert emulators.setpoints() == [0.0] * 3
-    assert probe.enable(True).success is False  # cannot energise under estop
+    assert not probe.enable_coils(True)  # cannot energise under estop
     probe.estop(False)
     assert wait_for(lambda: all(emulators.outputs()))
     assert emulators.setpoints() == [0.0] * 3  # nothing moves until a new command
-    response = probe.enable(False)
-    assert response.success
+    assert probe.enable_coils(False)
     assert wait_for(lambda: not any(emulators.outputs()))
-    probe.command_field([1e-3, 0, 0])
+    probe.send_field([1e-3, 0, 0])
     assert wait_for(lambda: 'outputs disabled' in node.output())
-    assert probe.enable(True).success
+    assert probe.enable_coils(True)
     assert drive(emulators, probe, [1e-3, 0, 0])
 
 
@@ -159,8 +158,8 @@ def test_transient_faults_are_retried_and_the_command_lands(coil_rig, probe, kin
     field = [2e-3, 4e-3, -2e-3]
     assert drive(emulators, probe, field)
     t0 = time.monotonic()
-    assert wait_for(lambda: probe.supply_status('y', t0) is not None)
-    values = {kv.key: kv.value for kv in probe.supply_status('y', t0).values}
+    assert wait_for(lambda: probe.status('coils: supply y', t0) is not None)
+    values = probe.status('coils: supply y', t0).values
     assert int(values['retries']) >= 1
     assert node.popen.poll() is None
 
@@ -168,14 +167,14 @@ def test_transient_faults_are_retried_and_the_command_lands(coil_rig, probe, kin
 def test_persistent_silence_zeroes_every_axis_and_recovers(coil_rig, probe):
     emulators, node = coil_rig('dxkdp', 115200, retries=2)
     ready(emulators, probe)
-    probe.command_field([3e-3, 3e-3, 3e-3])
+    probe.send_field([3e-3, 3e-3, 3e-3])
     assert wait_for(lambda: emulators.setpoints()[1] > 2.0)
     emulators.fault('y', 'no_reply', count=3)
-    probe.command_field([4e-3, 4e-3, 4e-3])
+    probe.send_field([4e-3, 4e-3, 4e-3])
     assert wait_for(lambda: 'failed after 3 attempts' in node.output())
     assert wait_for(lambda: emulators.setpoints() == [0.0] * 3)  # no stale nonzero current
     t0 = time.monotonic()
-    assert wait_for(lambda: probe.supply_status('y', t0) is not None)
+    assert wait_for(lambda: probe.status('coils: supply y', t0) is not None)
     assert wait_for(lambda: 'fault cleared' in node.output())
     assert drive(emulators, probe, [1e-3, 1e-3, 1e-3])
 
@@ -189,11 +188,11 @@ def test_serial_loss_shows_in_diagnostics_reconnects_and_drives_zero(coil_rig, p
     t_lost = time.monotonic()
 
     def reported(level):
-        status = probe.supply_status('z', t_lost)
+        status = probe.status('coils: supply z', t_lost)
         return status is not None and status.level == level
 
     assert wait_for(lambda: reported(DiagnosticStatus.ERROR), timeout_s=3.0)
-    assert 'disconnected' in probe.supply_status('z', t_lost).message
+    assert 'disconnected' in probe.status('coils: supply z', t_lost).message
     assert emulators.setpoints()[2] > 4.0  # unplugged, the coil keeps its stale current
     assert node.popen.poll() is None
     assert wait_for(lambda: emulators.state()['z']['connected'], timeout_s=4.0)
@@ -219,9 +218,9 @@ def test_scpi_error_queue_is_reported_and_setpoint_reasserted(coil_rig, probe):
     assert drive(emulators, probe, field, atol=1e-4)
     emulators.fault('x', 'error', count=1, code=-300, text='Device-specific error')
     t0 = time.monotonic()
-    assert wait_for(lambda: (probe.supply_status('x', t0) is not None
-                             and '-300' in probe.supply_status('x', t0).message))
-    assert probe.supply_status('x', t0).level == DiagnosticStatus.WARN
+    assert wait_for(lambda: (probe.status('coils: supply x', t0) is not None
+                             and '-300' in probe.status('coils: supply x', t0).message))
+    assert probe.status('coils: supply x', t0).level == DiagnosticStatus.WARN
     assert 'setpoint re-sent' in node.output()
 
 
@@ -229,7 +228,7 @@ def test_scpi_error_queue_is_reported_and_setpoint_reasserted(coil_rig, probe):
 def test_signal_sets_outputs_to_zero_and_off_before_exit(coil_rig, probe, sig):
     emulators, node = coil_rig('dxkdp', 9600)
     ready(emulators, probe)
-    probe.command_field([5e-3, -5e-3, 5e-3])
+    probe.send_field([5e-3, -5e-3, 5e-3])
     assert wait_for(lambda: abs(emulators.setpoints()[1]) > 4.0)
     assert node.stop(sig) == 0
     assert emulators.setpoints() == [0.0] * 3
@@ -243,9 +242,9 @@ def test_missing_port_at_start_keeps_the_node_up_until_it_appears(coil_rig, prob
     # to see at least one diagnostics message (1 Hz) about it.
     emulators.fault('x', 'disconnect', duration_s=6.0)
     t0 = time.monotonic()
-    assert probe.wait_for_subscriber()
-    assert wait_for(lambda: (probe.supply_status('x', t0) is not None
-                             and probe.supply_status('x', t0).level == DiagnosticStatus.ERROR),
+    assert probe.wait_for_coils()
+    assert wait_for(lambda: (s := probe.status('coils: supply x', t0)) is not None
+                    and s.level == DiagnosticStatus.ERROR,
                     timeout_s=8.0), 'no ERROR diagnostics for the missing supply x'
     assert not any(emulators.outputs()[1:])  # not energised while a supply is missing
     assert wait_for(lambda: all(emulators.outputs()), timeout_s=12.0), (
@@ -257,7 +256,7 @@ def test_missing_port_at_start_keeps_the_node_up_until_it_appears(coil_rig, prob
 def test_killed_node_still_leaves_the_coils_at_zero_and_off(coil_rig, probe):
     emulators, node = coil_rig('dxkdp', 115200)
     ready(emulators, probe)
-    probe.command_field([4e-3, 4e-3, 4e-3])
+    probe.send_field([4e-3, 4e-3, 4e-3])
     assert wait_for(lambda: emulators.setpoints()[0] > 7.0)
     node.stop(signal.SIGKILL)  # no chance to clean up: the bank process sees its input close
     assert wait_for(lambda: emulators.setpoints() == [0.0] * 3 and not any(emulators.outputs()))
@@ -301,7 +300,7 @@ def test_a_missing_params_file_is_named_and_nothing_starts(tmp_path):
 def test_signals_during_the_exit_ramp_change_nothing(coil_rig, probe):
     emulators, node = coil_rig('dxkdp', 9600, slew_rate=5.0, watchdog_s=30.0)
     ready(emulators, probe)
-    probe.command_field([5e-3, 0.0, 0.0])  # 9.4 A on x, ramped at 5 A/s
+    probe.send_field([5e-3, 0.0, 0.0])  # 9.4 A on x, ramped at 5 A/s
     assert wait_for(lambda: emulators.setpoints()[0] > 8.0)
     node.popen.send_signal(signal.SIGINT)
     assert wait_for(lambda: emulators.setpoints()[0] < 6.0)  # the exit ramp runs
@@ -317,13 +316,9 @@ def test_signals_during_the_exit_ramp_change_nothing(coil_rig, probe):
 
 
 def bank_value(probe, key, since):
-    array = probe.latest(probe.diagnostics, since)
-    if array is None:
-        return None
-    for status in array.status:
-        if status.name == 'coils: bank':
-            return {kv.key: kv.value for kv in status.values}.get(key), status
-    return None
+    """Return (a value of the 'coils: bank' status after a time, the Status), or None."""
+    status = probe.status('coils: bank', since)
+    return None if status is None else (status.values.get(key), status)
 
 
 def own_child(node, value):
@@ -335,7 +330,7 @@ def own_child(node, value):
 def test_a_killed_bank_process_is_replaced_and_the_coils_are_zero_and_off(coil_rig, probe):
     emulators, node = coil_rig('dxkdp', 9600)
     ready(emulators, probe)
-    probe.command_field([8e-3, -8e-3, 8e-3])
+    probe.send_field([8e-3, -8e-3, 8e-3])
     assert wait_for(lambda: emulators.setpoints()[0] > 15.0)
     t0 = time.monotonic()
     assert wait_for(lambda: own_child(node, bank_value(probe, 'bank_pid', t0)))
@@ -350,10 +345,10 @@ def test_a_killed_bank_process_is_replaced_and_the_coils_are_zero_and_off(coil_r
     assert '[ERROR]' in node.output().split('coil bank process died')[0].splitlines()[-1]
     assert wait_for(lambda: (bank_value(probe, 'bank_deaths', t_kill) or ('0',))[0] == '1')
     assert bank_value(probe, 'bank_deaths', t_kill)[1].level == DiagnosticStatus.ERROR
-    probe.command_field([1e-3, 1e-3, 1e-3])
+    probe.send_field([1e-3, 1e-3, 1e-3])
     assert wait_for(lambda: 'outputs disabled' in node.output())  # refused until enabled
     assert emulators.setpoints() == [0.0] * 3
-    assert probe.enable(True).success
+    assert probe.enable_coils(True)
     assert drive(emulators, probe, [1e-3, 1e-3, 1e-3])
 
 
@@ -362,7 +357,7 @@ def test_the_bank_and_its_spare_killed_together_leave_the_coils_zero_and_off(coi
     # to zero the supplies, and none was started.
     emulators, node = coil_rig('dxkdp', 9600)
     ready(emulators, probe)
-    probe.command_field([8e-3, -8e-3, 8e-3])
+    probe.send_field([8e-3, -8e-3, 8e-3])
     assert wait_for(lambda: emulators.setpoints()[0] > 15.0)
     t0 = time.monotonic()
     assert wait_for(lambda: (bank_value(probe, 'spare_pid', t0) or ('none',))[0] != 'none')
@@ -382,7 +377,7 @@ def test_the_bank_and_its_spare_killed_together_leave_the_coils_zero_and_off(coi
     # A spare is kept again, and neither of the killed processes is it.
     assert wait_for(lambda: (bank_value(probe, 'spare_pid', t_kill) or ('none',))[0] not in (
         'none', *map(str, pids)), timeout_s=15.0)
-    assert probe.enable(True).success
+    assert probe.enable_coils(True)
     assert drive(emulators, probe, [1e-3, 1e-3, 1e-3])
 
 

@@ -12,19 +12,13 @@ import math
 import os
 import signal
 import sys
-import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticStatus
 import pytest
-import rclpy  # tests/conftest.py claimed the private ROS domain before this
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from rig_support import Spinner, wait_for
-from std_msgs.msg import Bool, Float64
-from std_srvs.srv import Trigger
+from rig_support import wait_for
 from tentacle_common import contract
-from tentacle_common.driver_node import client, publisher, subscription
+from tentacle_rig.commander_node import RigCommander  # conftest claimed a private domain
 from tentacle_sim.emulator_client import StageEmulatorProcess
 from tentacle_sim.sim_rig import NodeProcess
 from tentacle_sim.stage_emulator import GcodeStage
@@ -34,65 +28,14 @@ STEP_M = 1e-5  # 100 steps a mm
 SPEED, ACCEL = 0.01, 0.5
 
 
-class AxisProbe:
-    """Publishes targets and the estop, calls stop and home, records state and diagnostics."""
+def axis_probe(axes=('inserter',)):
+    """Return the lab's facade (RigCommander) on some axes, as the tests' node; close() it."""
+    return RigCommander('axis_probe', axes=axes)
 
-    def __init__(self, axes=('inserter',)):
-        self.context = Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node('axis_probe', context=self.context)
-        self.lock = threading.Lock()
-        self.states = {axis: [] for axis in axes}
-        self.diagnostics = []
-        self.target_pubs = {axis: publisher(self.node, contract.axis_target(axis))
-                            for axis in axes}
-        self.estop_pub = publisher(self.node, contract.ESTOP)
-        for axis in axes:
-            subscription(self.node, contract.axis_state(axis),
-                         lambda msg, a=axis: self._keep(self.states[a], msg))
-        subscription(self.node, contract.DIAGNOSTICS,
-                     lambda msg: self._keep(self.diagnostics, msg))
-        self.clients = {(axis, name): client(self.node, contract.axis_service(axis, name))
-                        for axis in axes for name in ('stop', 'home')}
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.spinner = Spinner(self.executor)
 
-    def _keep(self, log, msg):
-        with self.lock:
-            log.append((time.monotonic(), msg))
-
-    def target(self, value, axis='inserter'):
-        self.target_pubs[axis].publish(Float64(data=float(value)))
-
-    def position(self, since=0.0, axis='inserter'):
-        with self.lock:
-            fresh = [m for t, m in self.states[axis] if t >= since]
-        return fresh[-1].position[0] if fresh else None
-
-    def status(self, since=0.0, axis='inserter'):
-        """Return (level, message, values) of the axis's latest diagnostics, or None."""
-        with self.lock:
-            arrays = [m for t, m in self.diagnostics if t >= since]
-        for array in reversed(arrays):
-            for status in array.status:
-                if status.name == f'inserter_node: {axis}':
-                    return (status.level, status.message,
-                            {kv.key: kv.value for kv in status.values})
-        return None
-
-    def call(self, name, axis='inserter', timeout_s=10.0):
-        client = self.clients[(axis, name)]
-        if not client.wait_for_service(timeout_sec=timeout_s):
-            return None
-        future = client.call_async(Trigger.Request())
-        wait_for(future.done, timeout_s)
-        return future.result()
-
-    def close(self):
-        self.spinner.stop()
-        self.node.destroy_node()
-        rclpy.shutdown(context=self.context)
+def axis_status(probe, since=-math.inf, axis='inserter'):
+    """Return the Status (level, message, values) of an axis after a time, or None."""
+    return probe.status(f'inserter_node: {axis}', since)
 
 
 def start_node(tmp_path, port, axis='inserter', **params):
@@ -112,10 +55,9 @@ def axis(tmp_path):
     link = str(tmp_path / 'stage')
     emu = GcodeStage('e', link_path=link, accel_m_s2=ACCEL).start()
     node = start_node(tmp_path, link)
-    probe = AxisProbe()
+    probe = axis_probe()
     try:
-        response = probe.call('home', timeout_s=20.0)
-        assert response is not None and response.success, node.output()
+        assert probe.home(timeout_s=20.0), node.output()
         yield probe, emu, node
     finally:
         probe.close()
@@ -134,19 +76,19 @@ def truth(emu):
 
 def test_a_target_moves_the_axis_and_state_follows_the_truth(axis):
     probe, emu, node = axis
-    probe.target(0.008)
+    probe.send_target('inserter', 0.008)
     assert wait_for(lambda: truth(emu) == pytest.approx(0.008, abs=STEP_M), 10)
     since = time.monotonic() + 0.2
-    assert wait_for(lambda: probe.position(since) is not None, 2.0)
-    assert abs(probe.position(since) - truth(emu)) <= STEP_M
-    assert wait_for(lambda: (probe.status(since) or (None,))[0] == DiagnosticStatus.OK, 3.0)
-    assert probe.status(since)[2]['position'] == 'measured'
+    assert wait_for(lambda: probe.position_m('inserter', since) is not None, 2.0)
+    assert abs(probe.position_m('inserter', since) - truth(emu)) <= STEP_M
+    assert wait_for(lambda: (axis_status(probe, since) or (None,))[0] == DiagnosticStatus.OK, 3.0)
+    assert axis_status(probe, since)[2]['position'] == 'measured'
 
 
 @pytest.mark.parametrize('bad', [math.nan, math.inf, -0.001, 0.06])
 def test_a_bad_target_is_refused_and_never_reaches_the_wire(axis, bad):
     probe, emu, node = axis
-    probe.target(bad)
+    probe.send_target('inserter', bad)
     assert wait_for(lambda: 'target refused' in node.output(), 5.0)
     time.sleep(0.3)
     assert not sent(emu, 'G1')
@@ -154,25 +96,25 @@ def test_a_bad_target_is_refused_and_never_reaches_the_wire(axis, bad):
 
 def test_stop_and_estop_halt_and_hold(axis):
     probe, emu, node = axis
-    probe.target(0.04)
+    probe.send_target('inserter', 0.04)
     assert wait_for(lambda: emu.state()['moving'], 5.0)
-    assert probe.call('stop').success
+    assert probe.stop_axis()
     assert wait_for(lambda: not emu.state()['busy'], 1.0)
-    assert probe.call('home').success
-    probe.estop_pub.publish(Bool(data=True))
+    assert probe.home()
+    probe.estop(True)
     time.sleep(0.3)
     moves = len(sent(emu, 'G1'))
     for target in (0.01, 0.02, 0.03):
-        probe.target(target)
+        probe.send_target('inserter', target)
     time.sleep(0.5)
     assert len(sent(emu, 'G1')) == moves and not emu.state()['busy']
-    assert not probe.call('home').success        # no home under estop either
-    probe.estop_pub.publish(Bool(data=False))
+    assert not probe.home()        # no home under estop either
+    probe.estop(False)
 
 
 def test_a_killed_node_leaves_the_axis_stopped(axis):
     probe, emu, node = axis
-    probe.target(0.04)
+    probe.send_target('inserter', 0.04)
     assert wait_for(lambda: emu.state()['moving'], 5.0)
     t_kill = time.monotonic()
     node.stop(signal.SIGKILL)    # no chance to clean up: the axis process sees its input close
@@ -183,19 +125,20 @@ def test_a_killed_node_leaves_the_axis_stopped(axis):
 
 def test_a_stalled_move_is_reported_and_the_axis_stopped(axis):
     probe, emu, node = axis
-    probe.target(0.01)
+    probe.send_target('inserter', 0.01)
     assert wait_for(lambda: emu.state()['moving'], 5.0)
     t0 = time.monotonic()
     emu.inject('stall')          # the position stops advancing; M400 never answers
     allowed = 1.5 * (0.01 / SPEED + SPEED / ACCEL) + 0.5
     assert wait_for(lambda: sent(emu, 'M112', t0), allowed + 2.0)
     assert wait_for(lambda: 'did not finish' in node.output(), 2.0), node.output()
-    assert wait_for(lambda: (probe.status(t0 + allowed) or (None, ''))[1].startswith(
+    assert wait_for(lambda: (axis_status(probe, t0 + allowed) or (None, ''))[1].startswith(
         'not homed'), 3.0)
-    assert probe.status(t0 + allowed)[0] == DiagnosticStatus.WARN
+    assert axis_status(probe, t0 + allowed)[0] == DiagnosticStatus.WARN
     since = time.monotonic() + 0.1
-    assert wait_for(lambda: probe.position(since) is not None, 2.0)
-    assert abs(probe.position(since) - truth(emu)) <= STEP_M   # read back where it stalled
+    assert wait_for(lambda: probe.position_m('inserter', since) is not None, 2.0)
+    # read back where it stalled
+    assert abs(probe.position_m('inserter', since) - truth(emu)) <= STEP_M
 
 
 @pytest.mark.parametrize('factor, finishes', [(0.9, True), (0.3, False)])
@@ -203,7 +146,7 @@ def test_a_slow_move_finishes_within_its_margin_or_is_stopped(axis, factor, fini
     probe, emu, node = axis
     emu.inject('slow', factor=factor)
     t0 = time.monotonic()
-    probe.target(0.02)
+    probe.send_target('inserter', 0.02)
     if finishes:
         assert wait_for(lambda: truth(emu) == pytest.approx(0.02, abs=STEP_M)
                         and not emu.state()['busy'], 10.0)
@@ -219,7 +162,7 @@ def test_a_lost_ok_is_retried_and_the_axis_moves_once(axis):
     probe, emu, node = axis
     t0 = time.monotonic()
     emu.inject('drop_reply', count=1, match='G1')
-    probe.target(0.005)
+    probe.send_target('inserter', 0.005)
     assert wait_for(lambda: truth(emu) == pytest.approx(0.005, abs=STEP_M)
                     and not emu.state()['busy'], 10.0)
     assert len(sent(emu, 'G1', t0)) == 2                  # the same absolute line twice
@@ -229,24 +172,25 @@ def test_a_lost_ok_is_retried_and_the_axis_moves_once(axis):
 
 def test_a_lost_line_reconnects_reads_back_and_replays_nothing(axis):
     probe, emu, node = axis
-    probe.target(0.01)
+    probe.send_target('inserter', 0.01)
     assert wait_for(lambda: emu.state()['moving'], 5.0)
     outage_s = 5.0               # long enough for the status, the target and its refusal
     emu.inject('disconnect', duration_s=outage_s)
     t_lost = time.monotonic()
-    assert wait_for(lambda: (probe.status(t_lost) or (None,))[0] == DiagnosticStatus.ERROR,
+    assert wait_for(lambda: (axis_status(probe, t_lost) or (None,))[0] == DiagnosticStatus.ERROR,
                     4.0)
-    probe.target(0.03)           # during the outage: refused, not kept for the reconnect
+    # During the outage: refused, not kept for the reconnect.
+    probe.send_target('inserter', 0.03)
     assert wait_for(lambda: 'target refused: not connected' in node.output(), 4.0), \
         node.output()
     assert not emu.state()['connected']                   # it was refused in the outage
     assert wait_for(lambda: sent(emu, 'M114', t_lost + outage_s), 6.0)   # read back, again
     t_back = time.monotonic()
-    assert wait_for(lambda: (probe.status(t_back) or (None, ''))[1].startswith(
+    assert wait_for(lambda: (axis_status(probe, t_back) or (None, ''))[1].startswith(
         'not homed'), 4.0)
     travel = emu.state()['travel_m']
     assert not sent(emu, 'G1', t_lost)                    # neither target is replayed
-    probe.target(0.02)                                    # nor a new one taken, unhomed
+    probe.send_target('inserter', 0.02)   # nor a new one taken, unhomed
     assert wait_for(lambda: 'not homed' in node.output().split('line lost')[-1], 3.0)
     assert not sent(emu, 'G1', t_lost) and not emu.state()['busy']
     assert emu.state()['travel_m'] == travel              # nothing moved it since the return
@@ -254,7 +198,7 @@ def test_a_lost_line_reconnects_reads_back_and_replays_nothing(axis):
 
 def test_a_firmware_reset_mid_move_is_caught_and_read_back(axis):
     probe, emu, node = axis
-    probe.target(0.02)
+    probe.send_target('inserter', 0.02)
     assert wait_for(lambda: truth(emu) > 0.003, 5.0)
     t0 = time.monotonic()
     emu.inject('reset')          # the board restarts: it forgets the move and counts from 0
@@ -263,11 +207,11 @@ def test_a_firmware_reset_mid_move_is_caught_and_read_back(axis):
     # The read-back reaches the stage before the failure's log line reaches the node's log.
     assert wait_for(lambda: 'restarted during the move' in node.output(), 3.0)
     t_back = time.monotonic()
-    assert wait_for(lambda: (probe.status(t_back) or (None, ''))[1].startswith(
-        'not homed'), 5.0), (probe.status(), node.output())
+    assert wait_for(lambda: (axis_status(probe, t_back) or (None, ''))[1].startswith(
+        'not homed'), 5.0), (axis_status(probe), node.output())
     since = time.monotonic() + 0.1
-    assert wait_for(lambda: probe.position(since) is not None, 2.0)
-    assert probe.position(since) == pytest.approx(truth(emu), abs=STEP_M) == 0.0
+    assert wait_for(lambda: probe.position_m('inserter', since) is not None, 2.0)
+    assert probe.position_m('inserter', since) == pytest.approx(truth(emu), abs=STEP_M) == 0.0
     assert emu.state()['travel_m'] == pytest.approx(stood)    # and nothing moved it since
 
 
@@ -275,13 +219,13 @@ def test_a_firmware_that_restarts_after_m112_is_waited_for_and_read_back(tmp_pat
     link = str(tmp_path / 'stage')
     emu = GcodeStage('e', link_path=link, accel_m_s2=ACCEL, reset_after_halt_s=1.0).start()
     node = start_node(tmp_path, link, steps_per_mm=80.0)  # the firmware boots with 100
-    probe = AxisProbe()
+    probe = axis_probe()
     try:
-        assert probe.call('home', timeout_s=20.0).success, node.output()
-        probe.target(0.02)
+        assert probe.home(timeout_s=20.0), node.output()
+        probe.send_target('inserter', 0.02)
         assert wait_for(lambda: truth(emu) > 0.002, 5.0)
         t_stop = time.monotonic()
-        assert probe.call('stop').success
+        assert probe.stop_axis()
         assert wait_for(lambda: not emu.state()['busy'], 0.5)      # halted at once
         stood = emu.state()['travel_m']
         assert wait_for(lambda: emu.state()['halted'] is False, 3.0)  # it restarted by itself
@@ -289,11 +233,12 @@ def test_a_firmware_that_restarts_after_m112_is_waited_for_and_read_back(tmp_pat
         assert wait_for(lambda: [e['command'] for e in emu.log if e['t'] > t_stop + 1.0][-2:]
                         == ['M92', 'M114'], 3.0), node.output()
         since = time.monotonic() + 0.1
-        assert wait_for(lambda: probe.position(since) is not None, 2.0)
-        assert probe.position(since) == 0.0 == truth(emu)       # a restart counts from 0 here
+        assert wait_for(lambda: probe.position_m('inserter', since) is not None, 2.0)
+        # A restart counts from 0 here.
+        assert probe.position_m('inserter', since) == 0.0 == truth(emu)
         assert emu.state()['travel_m'] == stood and emu.state()['steps_per_mm'] == 80.0
-        assert probe.call('home').success
-        probe.target(0.001)
+        assert probe.home()
+        probe.send_target('inserter', 0.001)
         assert wait_for(lambda: truth(emu) == pytest.approx(0.001, abs=STEP_M), 5.0)
         assert emu.state()['travel_m'] == pytest.approx(stood + 0.001, abs=STEP_M)
     finally:
@@ -305,18 +250,18 @@ def test_a_firmware_that_restarts_after_m112_is_waited_for_and_read_back(tmp_pat
 
 def test_a_killed_axis_process_is_replaced_and_the_axis_halted(axis):
     probe, emu, node = axis
-    probe.target(0.04)
+    probe.send_target('inserter', 0.04)
     assert wait_for(lambda: emu.state()['moving'], 5.0)
-    assert wait_for(lambda: probe.status() is not None, 3.0)
-    pid = int(probe.status()[2]['pid'])
+    assert wait_for(lambda: axis_status(probe) is not None, 3.0)
+    pid = int(axis_status(probe)[2]['pid'])
     t_kill = time.monotonic()
     os.kill(pid, signal.SIGKILL)  # a crash of the axis process: the node's spare takes over
     assert wait_for(lambda: not emu.state()['busy'], 2.0)
     assert time.monotonic() - t_kill < 1.5
-    assert wait_for(lambda: 'died (exit -9)' in (probe.status(t_kill) or (0, ''))[1], 4.0)
-    assert probe.status(t_kill)[0] == DiagnosticStatus.ERROR
-    assert probe.call('home').success
-    probe.target(0.002)
+    assert wait_for(lambda: 'died (exit -9)' in (axis_status(probe, t_kill) or (0, ''))[1], 4.0)
+    assert axis_status(probe, t_kill)[0] == DiagnosticStatus.ERROR
+    assert probe.home()
+    probe.send_target('inserter', 0.002)
     assert wait_for(lambda: truth(emu) == pytest.approx(0.002, abs=STEP_M), 5.0)
 
 
@@ -326,26 +271,26 @@ def test_inserter_and_backbone_side_by_side_gcode_and_step1mm(tmp_path):
     nodes = [start_node(tmp_path, emus.ports['inserter']),
              start_node(tmp_path, emus.ports['backbone'], axis='backbone', dialect='step1mm',
                         baud=9600)]
-    probe = AxisProbe(('inserter', 'backbone'))
+    probe = axis_probe(('inserter', 'backbone'))
     try:
-        assert probe.call('home', 'inserter', timeout_s=20.0).success, nodes[0].output()
-        assert probe.call('home', 'backbone', timeout_s=20.0).success, nodes[1].output()
-        probe.target(0.006, 'inserter')
-        probe.target(0.003, 'backbone')
+        assert probe.home('inserter', timeout_s=20.0), nodes[0].output()
+        assert probe.home('backbone', timeout_s=20.0), nodes[1].output()
+        probe.send_target('inserter', 0.006)
+        probe.send_target('backbone', 0.003)
         assert wait_for(lambda: emus.axis('inserter')['position_m'] == pytest.approx(
             0.006, abs=STEP_M) and emus.axis('backbone')['position_m'] == pytest.approx(
             0.003, abs=1e-9) and not emus.axis('backbone')['busy'], 10.0)
         since = time.monotonic() + 0.2
-        assert wait_for(lambda: probe.position(since, 'backbone') is not None
-                        and probe.position(since, 'inserter') is not None, 3.0)
-        assert probe.position(since, 'backbone') == pytest.approx(0.003)   # counted
-        assert abs(probe.position(since, 'inserter') - 0.006) <= STEP_M   # read back
-        assert wait_for(lambda: probe.status(since, 'backbone') is not None, 3.0)
-        assert probe.status(since, 'backbone')[2]['position'].startswith('estimated')
+        assert wait_for(lambda: probe.position_m('backbone', since) is not None
+                        and probe.position_m('inserter', since) is not None, 3.0)
+        assert probe.position_m('backbone', since) == pytest.approx(0.003)   # counted
+        assert abs(probe.position_m('inserter', since) - 0.006) <= STEP_M   # read back
+        assert wait_for(lambda: axis_status(probe, since, 'backbone') is not None, 3.0)
+        assert axis_status(probe, since, 'backbone')[2]['position'].startswith('estimated')
         commands = [e['command'] for e in emus.log('backbone')]
         assert commands == ['stop', 'extend', 'extend', 'extend']
-        assert {'inserter_node', 'backbone_node'} <= set(probe.node.get_node_names())
-        assert probe.call('stop', 'backbone').success
+        assert {'inserter_node', 'backbone_node'} <= set(probe.get_node_names())
+        assert probe.stop_axis('backbone')
         assert wait_for(lambda: [e['command'] for e in emus.log('backbone')][-1] == 'stop')
     finally:
         probe.close()

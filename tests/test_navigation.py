@@ -163,7 +163,7 @@ def test_the_closed_loop_corrects_the_field_and_cuts_the_shape_error(rig, record
     commander, devices, _ = rig
     result = commander.play(mode='closed_loop', timeout_s=60.0)
     assert result.outcome is Outcome.DONE, result
-    figures = {v.key: v.value for v in commander.latest('player').values}
+    figures = commander.status('player_node: run').values
     bag = recording()
     path = paths.Path(np.array(yaml.safe_load(schedule[1].read_text())['path_m']))
     closed_mm = np.mean([s.shape_rms_m for s in steps_of(bag, path)]) * 1e3

@@ -55,8 +55,8 @@ def rig(tmp_path_factory):
     try:
         assert probe.home(), rig.process('inserter_node').output()
         # Nothing inserted: the tracker sees the empty scene (the sheath, the phantom).
-        assert wait_for(probe.capture_background, 20.0), rig.process('tracker_node').output()
-        probe.target(LENGTH_M)
+        assert probe.capture_background(), rig.process('tracker_node').output()
+        assert probe.move_axis('inserter', LENGTH_M), rig.process('inserter_node').output()
         assert wait_for(lambda: (s := probe.shape()) is not None
                         and arc_length_m(s) == pytest.approx(LENGTH_M, abs=1e-5), 30.0), (
             rig.process('sim_node').output())
@@ -91,7 +91,7 @@ def supply(devices, axis):
 
 def test_a_held_field_bends_the_body_as_the_elastica_says(rig):
     probe, devices, _ = rig
-    probe.hold_field([0.0, FIELD_T, 0.0])
+    assert probe.set_field([0.0, FIELD_T, 0.0], wait=False)
     # The supply's output settles (slew, then the coil's L/R), then the body with it.
     assert wait_for(lambda: abs(supply(devices, 'y')['current_a'] - Y_AMPS) < 0.01, 10.0)
     since = time.monotonic() + 0.2
@@ -143,7 +143,7 @@ def test_a_field_step_shows_in_the_shape_within_a_second(rig):
     probe, _, _ = rig
     before = settled(probe, time.monotonic())[-1]
     commanded = time.time()
-    probe.hold_field([0.0, FIELD_T / 2, 0.0])
+    assert probe.set_field([0.0, FIELD_T / 2, 0.0], wait=False)
     since = time.monotonic()
     assert wait_for(lambda: any(np.linalg.norm(points_of(m)[-1] - before) > 1e-4
                                 for m in probe.every('shape', since)), 10.0)
@@ -154,11 +154,11 @@ def test_a_field_step_shows_in_the_shape_within_a_second(rig):
 
 def test_a_stalled_stage_stops_the_insertion_where_it_stalled(rig):
     probe, devices, _ = rig
-    probe.hold_field([0.0, 0.0, 0.0])
-    probe.target(0.005)
+    assert probe.set_field([0.0, 0.0, 0.0], wait=False)
+    probe.send_target('inserter', 0.005)
     settled(probe, time.monotonic(), lambda p: arc_length_m(p) == pytest.approx(0.005, abs=1e-5))
     ask(devices, {'op': 'fault', 'port': 'inserter', 'kind': 'stall', 'after_m': 0.006})
-    probe.target(LENGTH_M)
+    probe.send_target('inserter', LENGTH_M)
     # The driver finds the move never ends, stops the axis and says so, as on the rig.
     node = rig[2].process('inserter_node')
     assert wait_for(lambda: 'did not finish' in node.output(), 30.0), node.output()
@@ -166,17 +166,17 @@ def test_a_stalled_stage_stops_the_insertion_where_it_stalled(rig):
     assert arc_length_m(points) == pytest.approx(0.011, abs=2e-5)   # where it stalled
     # Stopped unhomed, as a stall leaves an axis: zero where it stands, then in all the way.
     assert probe.home()
-    probe.target(LENGTH_M - 0.011)
+    probe.send_target('inserter', LENGTH_M - 0.011)
     settled(probe, time.monotonic(),
             lambda p: arc_length_m(p) == pytest.approx(LENGTH_M, abs=1e-5))
 
 
 def test_estop_brings_the_supplies_to_zero_and_the_body_relaxes_straight(rig):
     probe, devices, _ = rig
-    probe.hold_field([0.0, FIELD_T, 0.0])
+    assert probe.set_field([0.0, FIELD_T, 0.0], wait=False)
     settled(probe, time.monotonic(), lambda p: p[-1, 1] > 0.01)
     probe.estop(True)
-    probe.hold_field(None)   # what a player does on an estop: commands stop
+    probe.release_field()   # what a player does on an estop: commands stop
     try:
         # The currents read from the supplies themselves: the physics saw the real ones.
         assert wait_for(lambda: all(abs(s['current_a']) < 1e-3 and not s['output_on']
@@ -192,7 +192,7 @@ def test_estop_brings_the_supplies_to_zero_and_the_body_relaxes_straight(rig):
 
 def test_a_supply_whose_line_is_lost_keeps_its_current_and_the_body_stays_bent(rig):
     probe, devices, _ = rig
-    probe.hold_field([0.0, FIELD_T, 0.0])
+    assert probe.set_field([0.0, FIELD_T, 0.0], wait=False)
     assert wait_for(lambda: abs(supply(devices, 'y')['current_a'] - Y_AMPS) < 0.01, 10.0)
     ask(devices, {'op': 'fault', 'port': 'coil_y', 'kind': 'disconnect', 'duration_s': 6.0})
     since = time.monotonic()
@@ -203,7 +203,7 @@ def test_a_supply_whose_line_is_lost_keeps_its_current_and_the_body_stays_bent(r
     assert supply(devices, 'y')['current_a'] == pytest.approx(Y_AMPS, abs=0.01)
     points = settled(probe, time.monotonic())
     assert np.linalg.norm(points[-1, :2] - TIP_M) < 0.02 * LENGTH_M
-    probe.hold_field(None)
+    probe.release_field()
     # Reconnected, the driver finds it holding current and drives it to zero.
     assert wait_for(lambda: abs(supply(devices, 'y')['current_a']) < 1e-3, 20.0)
     settled(probe, time.monotonic(), lambda p: abs(p[-1, 1]) < 1e-6)
@@ -212,7 +212,7 @@ def test_a_supply_whose_line_is_lost_keeps_its_current_and_the_body_stays_bent(r
 
 def test_markers_show_the_body_the_field_the_path_and_the_phantom(rig):
     probe, _, _ = rig
-    probe.hold_field([0.0, FIELD_T, 0.0])
+    assert probe.set_field([0.0, FIELD_T, 0.0], wait=False)
     settled(probe, time.monotonic(), lambda p: p[-1, 1] > 0.01)
     since = time.monotonic()
     assert wait_for(lambda: probe.latest('markers', since) is not None, 10.0)
@@ -226,4 +226,4 @@ def test_markers_show_the_body_the_field_the_path_and_the_phantom(rig):
     ball = markers['obstacles']
     assert [ball.pose.position.x, ball.pose.position.y] == pytest.approx(BALL_CENTRE_M[:2])
     assert ball.scale.x == pytest.approx(2 * BALL_RADIUS_M)
-    probe.hold_field([0.0, 0.0, 0.0])
+    assert probe.set_field([0.0, 0.0, 0.0], wait=False)

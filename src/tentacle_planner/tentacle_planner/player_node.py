@@ -20,7 +20,6 @@ pauses the run and says why (``on_fault`` abort: aborts it). Progress on /player
 and /diagnostics. On exit a run still commanding is aborted: zero field, stages stopped.
 """
 
-from collections import deque
 import math
 import sys
 import time
@@ -46,6 +45,7 @@ from tentacle_model.model import TentacleModel
 from tentacle_model.tentacle_spec import load_tentacle, SpecError
 from tentacle_planner import paths
 from tentacle_planner.errors import PlanInputError
+from tentacle_planner.loop_gate import LoopGate
 from tentacle_planner.player import Phase, play_steps, Player, Seen, Settings
 from tentacle_planner.player_params import (LOOP_PARAMS, MODES, NODE_NAME, PLAYER_PARAMS,
                                             REFERENCES)
@@ -68,32 +68,6 @@ def _name_of(endpoint):
 
 def _stamp_s(msg):
     return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-
-
-class LoopFigures:
-    """The closed loop's rate and its latency from a frame's stamp to the field command."""
-
-    def __init__(self):
-        """Keep the recent past only."""
-        self.latency_s = deque(maxlen=2000)
-        self.intervals_s = deque(maxlen=2000)
-        self.corrections, self._last = 0, None
-
-    def evaluated(self, now, step, latency_s, corrected):
-        """Record one frame evaluated at a step (monotonic s), with its latency."""
-        if self._last is not None and self._last[1] == step:
-            self.intervals_s.append(now - self._last[0])
-        self._last = (now, step)
-        if corrected:
-            self.latency_s.append(latency_s)
-            self.corrections += 1
-
-    def values(self):
-        """Return the figures for /diagnostics: rate (Hz), latency median and p95 (ms)."""
-        rate = 1.0 / np.median(self.intervals_s) if self.intervals_s else math.nan
-        lat = np.percentile(self.latency_s, [50, 95]) * 1e3 if self.latency_s else [math.nan] * 2
-        return {'loop_corrections': self.corrections, 'loop_rate_hz': f'{rate:.1f}',
-                'loop_latency_ms_median': f'{lat[0]:.1f}', 'loop_latency_ms_p95': f'{lat[1]:.1f}'}
 
 
 class PlayerNode(Node):
@@ -122,12 +96,10 @@ class PlayerNode(Node):
         self.path = self.insertion_point = None
         self.coils_max_field = None
         self._published_field, self._published_at, self._step_key = None, -math.inf, None
-        self._frame_after_ros, self._last_loop = 0.0, -math.inf
-        self._loop_converged, self._shape_at = False, -math.inf
+        self.gate, self._shape_at = LoopGate(), -math.inf
         self._shape_raw, self._shape_points = None, None
         self._others = []
         self._phase = None
-        self.figures = LoopFigures()
 
         self.field_pub = publisher(self, contract.FIELD_CMD)
         self.target_pubs = {axis: publisher(self, contract.axis_target(axis))
@@ -310,7 +282,7 @@ class PlayerNode(Node):
                 self.seen.faults = self.faults()
                 command = player.start(now, self.seen)
                 self.player = player
-                self.figures = LoopFigures()
+                self.gate = LoopGate()
                 command.said[0] += (f' ({"retracting" if verb == "retract" else "inserting"}'
                                     f' {self.schedule.source}, {self.loop["mode"]})')
             elif self.player is None:
@@ -335,13 +307,12 @@ class PlayerNode(Node):
         if self.player is None:
             return
         self.seen.faults = self.faults()
-        busy = self.looping() and not self._loop_converged
+        busy = self.looping() and not self.gate.converged
         self.apply(self.player.update(time.monotonic(), self.seen, busy))
         if self.player.phase is not self._phase:
             self._phase = self.player.phase
-            if self._phase is Phase.DWELL:   # frames before this may show the stage moving
-                self._frame_after_ros = max(self._frame_after_ros,
-                                            self.get_clock().now().nanoseconds * 1e-9)
+            if self._phase is Phase.DWELL:
+                self.gate.dwell_began(self.get_clock().now().nanoseconds * 1e-9)
         finished_at_zero = self.player.phase in (Phase.ABORTED, Phase.DONE) and \
             self.player.field_t is not None and not np.any(self.player.field_t)
         if finished_at_zero and self.seen.field_t is not None and \
@@ -374,7 +345,7 @@ class PlayerNode(Node):
             for controller in (self.controller, self.tip_control, self.coiling):
                 if controller is not None:
                     controller.new_step()
-            self._loop_converged = False
+            self.gate.new_step()
             self.publish_progress()
 
     def publish_field(self, field_t, now):
@@ -384,7 +355,7 @@ class PlayerNode(Node):
         msg.header.frame_id = contract.COILS_FRAME
         msg.vector.x, msg.vector.y, msg.vector.z = (float(v) for v in field_t)
         if self._published_field is None or not np.array_equal(field_t, self._published_field):
-            self._frame_after_ros = _stamp_s(msg) + self.loop['loop_settle_s']
+            self.gate.field_changed(_stamp_s(msg), self.loop['loop_settle_s'])
         self.field_pub.publish(msg)
         self._published_field, self._published_at = np.array(field_t, dtype=float), now
 
@@ -392,11 +363,8 @@ class PlayerNode(Node):
     def _fresh(self, stamp_s):
         """Return whether a frame taken at stamp_s (ROS time, s) may drive a correction now."""
         self._shape_at = time.monotonic()
-        if not self.looping() or self.player.phase is not Phase.DWELL or self._loop_converged:
-            return False
-        if stamp_s < self._frame_after_ros:   # taken before the last command settled
-            return False
-        return time.monotonic() - self._last_loop >= 1.0 / self.loop['loop_rate']
+        return self.looping() and self.player.phase is Phase.DWELL and \
+            self.gate.fresh(stamp_s, self._shape_at, self.loop['loop_rate'])
 
     def latest_shape(self):
         """Return the latest tracked centreline (N, 2), workspace m, or None."""
@@ -439,12 +407,10 @@ class PlayerNode(Node):
 
     def _corrected(self, stamp_s, correction):
         now = time.monotonic()
-        self._last_loop = now
-        self._loop_converged = correction.converged
         latency = self.get_clock().now().nanoseconds * 1e-9 - stamp_s
         if not correction.converged:
             self.apply(self.player.adjust_field(correction.field_t))
-        self.figures.evaluated(now, self.player.index, latency, not correction.converged)
+        self.gate.corrected(now, self.player.index, latency, correction.converged)
 
     # -- reports ------------------------------------------------------------------------
     def tracked_errors(self):
@@ -481,7 +447,7 @@ class PlayerNode(Node):
             ('warn' if self.player.reason == 'asked to' else 'error')
         values = {'phase': phase.value, 'step': step.index, 'steps': count,
                   'inserted_mm': f'{step.inserted_m * 1e3:.3f}', 'mode': self.loop['mode'],
-                  'schedule': str(self.schedule.source), **self.figures.values()}
+                  'schedule': str(self.schedule.source), **self.gate.figures.values()}
         self._publish_status(level, phase.value + (f': {self.player.reason}'
                                                    if self.player.reason else ''), values)
 

@@ -17,12 +17,14 @@ watchdog ramps an unrenewed field to zero after watchdog_s) until ``release_fiel
 ``close``. Units: tesla, metre, second.
 """
 
+from collections import deque
 from dataclasses import dataclass
 import enum
 import math
 import os
 import threading
 import time
+from typing import NamedTuple
 
 from geometry_msgs.msg import Vector3Stamped
 import numpy as np
@@ -38,10 +40,11 @@ from std_srvs.srv import SetBool, Trigger
 from tentacle_common import contract
 from tentacle_common.discovery import private_by_default
 from tentacle_common.driver_node import client, publisher, subscription
+from tentacle_common.waiting import wait_for
 
 COILS_NODE = 'coils_node'
 HOLD_PERIOD_S = 0.2     # a held field is sent again this often
-POLL_S = 0.01
+KEEP = 400              # messages kept of each kind: the recent past a script looks at
 
 
 class Outcome(enum.Enum):
@@ -64,6 +67,14 @@ class Result:
     def __bool__(self):
         """Return True when the call did what it was asked."""
         return self.outcome is Outcome.DONE
+
+
+class Status(NamedTuple):
+    """One node's /diagnostics status: its level (DiagnosticStatus.OK, ...), text, values."""
+
+    level: int
+    message: str
+    values: dict
 
 
 @dataclass(frozen=True)
@@ -91,17 +102,17 @@ class RigCommander(Node):
         rclpy.init(context=self._context)
         super().__init__(name, context=self._context)
         self._lock = threading.Lock()
-        self._latest = {}
+        self._kept = {}
         self._held = None
-        self.field_pub = None   # made by set_field: the player pauses while another commands
+        self.field_pub = None   # made on the first field sent: the player pauses while
+        #                         another node publishes field commands
         self.estop_pub = publisher(self, contract.ESTOP)
         self.target_pubs = {a: publisher(self, contract.axis_target(a)) for a in axes}
-        subscription(self, contract.FIELD, lambda m: self._keep('field', m))
-        subscription(self, contract.PLAYER_PROGRESS, lambda m: self._keep('progress', m))
+        self.follow('field', contract.FIELD)
+        self.follow('progress', contract.PLAYER_PROGRESS)
         subscription(self, contract.DIAGNOSTICS, self._on_diagnostics)
         for axis in axes:
-            subscription(self, contract.axis_state(axis),
-                         lambda m, a=axis: self._keep(f'state:{a}', m))
+            self.follow(f'state:{axis}', contract.axis_state(axis))
         self.player_params = AsyncParameterClient(self, 'player_node')
         self._executor = SingleThreadedExecutor(context=self._context)
         self._executor.add_node(self)
@@ -114,41 +125,45 @@ class RigCommander(Node):
         next_hold = time.monotonic()
         while not self._stop.is_set():
             self._executor.spin_once(timeout_sec=0.05)
-            held = self._held
-            if held is not None and time.monotonic() >= next_hold:
+            if self._held is not None and time.monotonic() >= next_hold:
                 next_hold = time.monotonic() + HOLD_PERIOD_S
-                self._publish_field(held)
+                self._send_field(renew=True)
 
     def _keep(self, key, msg):
         with self._lock:
-            self._latest[key] = (time.monotonic(), msg)
+            self._kept.setdefault(key, deque(maxlen=KEEP)).append((time.monotonic(), msg))
 
     def _on_diagnostics(self, msg):
         for status in msg.status:
-            if status.name == 'player_node: run':
-                self._keep('player', status)
-            elif status.name == 'recorder_node: bag':
-                self._keep('recorder', status)
+            self._keep(f'status:{status.name}', status)
 
-    def latest(self, key, since=-math.inf):
+    def follow(self, key, topic):
+        """Subscribe to a contract topic and keep its messages as a kind named key."""
+        subscription(self, topic, lambda m: self._keep(key, m))
+
+    def every(self, key, since=-math.inf):
         """
-        Return the newest message of a kind received after a monotonic time, or None.
+        Return the kept messages of a kind received after a monotonic time, oldest first.
 
-        Kinds: 'field', 'progress', 'state:<axis>', 'player' (its /diagnostics status).
+        Kinds: 'field', 'progress', 'state:<axis>', 'status:<diagnostic status name>' and
+        those added by follow(); the last KEEP of each.
         """
         with self._lock:
-            got = self._latest.get(key)
+            kept = list(self._kept.get(key, ()))
+        return [m for t, m in kept if t >= since]
+
+    def latest(self, key, since=-math.inf):
+        """Return the newest message of a kind received after a monotonic time, or None."""
+        with self._lock:
+            kept = self._kept.get(key)
+            got = kept[-1] if kept else None
         return got[1] if got is not None and got[0] >= since else None
 
-    @staticmethod
-    def _wait(condition, timeout_s):
-        """Return condition()'s value once true, or its last value at the deadline."""
-        deadline = time.monotonic() + timeout_s
-        while True:
-            value = condition()
-            if value or time.monotonic() >= deadline:
-                return value
-            time.sleep(POLL_S)
+    def status(self, name, since=-math.inf):
+        """Return the newest Status a node published under a name after a time, or None."""
+        msg = self.latest(f'status:{name}', since)
+        return None if msg is None else Status(msg.level, msg.message,
+                                               {v.key: v.value for v in msg.values})
 
     def _matched(self, pub, node_name, timeout_s):
         """
@@ -161,7 +176,7 @@ class RigCommander(Node):
             subs = self.get_subscriptions_info_by_topic(pub.topic_name)
             return any(s.node_name == node_name for s in subs) and \
                 pub.get_subscription_count() >= len(subs)
-        return self._wait(ready, timeout_s)
+        return wait_for(ready, timeout_s)
 
     def _call(self, srv, request, timeout_s):
         handle = client(self, srv)
@@ -170,7 +185,7 @@ class RigCommander(Node):
                 return Result(Outcome.TIMED_OUT, f'no {srv.name} in {timeout_s:g} s: is the '
                               'rig up?')
             future = handle.call_async(request)
-            if not self._wait(future.done, timeout_s):
+            if not wait_for(future.done, timeout_s):
                 return Result(Outcome.TIMED_OUT, f'{srv.name}: no answer in {timeout_s:g} s')
             answer = future.result()
             return Result(Outcome.DONE if answer.success else Outcome.REFUSED, answer.message)
@@ -182,7 +197,7 @@ class RigCommander(Node):
         """Wait until the rig's readings arrive (default: the field and the inserter)."""
         def missing():
             return [k for k in needs if self.latest(k) is None]
-        if self._wait(lambda: not missing(), timeout_s):
+        if wait_for(lambda: not missing(), timeout_s):
             return Result(Outcome.DONE, 'the rig is up')
         return Result(Outcome.TIMED_OUT, f'nothing from {", ".join(missing())} in '
                       f'{timeout_s:g} s: is the rig up?')
@@ -192,11 +207,11 @@ class RigCommander(Node):
         since = time.monotonic()   # a status from before may be an earlier recorder's
 
         def missing():
-            status = self.latest('recorder', since)
+            status = self.status('recorder_node: bag', since)
             matched = set() if status is None else set(
-                {v.key: v.value for v in status.values}.get('matched', '').split(','))
+                status.values.get('matched', '').split(','))
             return [t.name for t in topics if t.name not in matched]
-        if self._wait(lambda: not missing(), timeout_s):
+        if wait_for(lambda: not missing(), timeout_s):
             return Result(Outcome.DONE, 'recording')
         return Result(Outcome.TIMED_OUT, f'recorder_node has no publisher on '
                       f'{", ".join(missing())} after {timeout_s:g} s')
@@ -206,35 +221,64 @@ class RigCommander(Node):
         msg = self.latest('field')
         return None if msg is None else np.array([msg.vector.x, msg.vector.y, msg.vector.z])
 
-    def _publish_field(self, field_t):
+    def _field_publisher(self):
         with self._lock:
-            pub = self.field_pub
-        if pub is None:
-            return
-        msg = Vector3Stamped()
-        msg.header.stamp = self.get_clock().now().to_msg()
-        msg.header.frame_id = contract.COILS_FRAME
-        msg.vector.x, msg.vector.y, msg.vector.z = (float(v) for v in field_t)
-        pub.publish(msg)
+            if self.field_pub is None:
+                self.field_pub = publisher(self, contract.FIELD_CMD)
+            return self.field_pub
 
-    def set_field(self, field_t, timeout_s=5.0, tolerance_t=2e-4):
-        """Command and hold a field, T (frame coils); wait until it reads back within tolerance."""
+    def _send_field(self, field_t=None, frame_id=contract.COILS_FRAME, renew=False):
+        # Under the lock: release_field may destroy the publisher from another thread, and a
+        # renewal that lost that race must neither publish nor make a new publisher.
+        with self._lock:
+            field_t = self._held if renew else field_t
+            if renew and (field_t is None or self.field_pub is None):
+                return
+            msg = Vector3Stamped()
+            msg.header.stamp = self.get_clock().now().to_msg()
+            msg.header.frame_id = frame_id
+            msg.vector.x, msg.vector.y, msg.vector.z = (float(v) for v in field_t)
+            if self.field_pub is None:
+                self.field_pub = publisher(self, contract.FIELD_CMD)
+            self.field_pub.publish(msg)
+
+    def send_field(self, field_t, frame_id=contract.COILS_FRAME):
+        """
+        Publish one field command, T, as it is: not checked, held or read back.
+
+        For tests of what the rig does with any command; a script wants set_field.
+        """
+        self._send_field(field_t, frame_id)
+
+    def wait_for_coils(self, timeout_s=10.0):
+        """Wait until coils_node is matched to this node's field commands."""
+        if self._matched(self._field_publisher(), COILS_NODE, timeout_s):
+            return Result(Outcome.DONE, f'{COILS_NODE} takes field commands')
+        return Result(Outcome.TIMED_OUT, f'{COILS_NODE} does not subscribe to '
+                      f'{contract.FIELD_CMD.name} after {timeout_s:g} s: is the rig up?')
+
+    def set_field(self, field_t, timeout_s=5.0, tolerance_t=2e-4, wait=True):
+        """
+        Command and hold a field, T (frame coils); wait until it reads back within tolerance.
+
+        wait=False: DONE once coils_node takes the command, not waiting for its ramp.
+        """
         field = np.asarray(field_t, dtype=float)
         if field.shape != (3,) or not np.all(np.isfinite(field)):
             return Result(Outcome.REFUSED, f'field {field_t!r}: three finite numbers, tesla')
-        if self.field_pub is None:
-            self.field_pub = publisher(self, contract.FIELD_CMD)
-        if not self._matched(self.field_pub, COILS_NODE, timeout_s):
-            return Result(Outcome.TIMED_OUT, f'{COILS_NODE} does not subscribe to '
-                          f'{contract.FIELD_CMD.name} after {timeout_s:g} s: is the rig up?')
+        result = self.wait_for_coils(timeout_s)
+        if not result:
+            return result
         since = time.monotonic()
         self._held = field
-        self._publish_field(field)
+        self._send_field(field)
+        if not wait:
+            return Result(Outcome.DONE, f'{field * 1e3} mT sent and held')
 
         def there():
             msg = self.latest('field', since)
             return msg is not None and np.abs(self.field_t() - field).max() <= tolerance_t
-        if self._wait(there, timeout_s):
+        if wait_for(there, timeout_s):
             return Result(Outcome.DONE, f'the field reads {self.field_t() * 1e3} mT')
         return Result(Outcome.TIMED_OUT, f'the field reads {self.field_t()} T, not {field} T, '
                       f'after {timeout_s:g} s (coils_node logs a refusal)')
@@ -245,23 +289,38 @@ class RigCommander(Node):
 
         coils_node ramps the field to zero after its watchdog_s.
         """
-        self._held = None
         with self._lock:
-            pub, self.field_pub = self.field_pub, None
-        if pub is not None:
-            self.destroy_publisher(pub)
+            self._held = None
+            if self.field_pub is not None:
+                self.destroy_publisher(self.field_pub)
+                self.field_pub = None
+
+    def position_m(self, axis='inserter', since=-math.inf):
+        """Return a stage's position read back after a monotonic time, m, or None."""
+        msg = self.latest(f'state:{axis}', since)
+        return None if msg is None else msg.position[0]
+
+    def send_target(self, axis, position_m):
+        """
+        Publish one target to a stage, m, as it is: not checked, waited for or read back.
+
+        For tests of what the rig does with any target; a script wants move_axis.
+        """
+        self.target_pubs[axis].publish(Float64(data=float(position_m)))
 
     def move_axis(self, axis, position_m, timeout_s=30.0, tolerance_m=2e-5):
         """Send a stage to a position, m; wait until it stands there."""
         if axis not in self.target_pubs:
             return Result(Outcome.REFUSED, f'{axis!r} is not one of {", ".join(self.target_pubs)}')
+        if not math.isfinite(position_m):
+            return Result(Outcome.REFUSED, f'{axis} target {position_m!r}: a finite number, m')
         pub = self.target_pubs[axis]
         node = contract.axis_node_name(axis)
         if not self._matched(pub, node, min(timeout_s, 10.0)):
             return Result(Outcome.TIMED_OUT, f'{node} does not subscribe to {pub.topic_name} '
                           f'after {min(timeout_s, 10.0):g} s: is the rig up?')
         since = time.monotonic()
-        pub.publish(Float64(data=float(position_m)))
+        self.send_target(axis, position_m)
         # One target, sent once: the node may not yet have matched this publisher back; a
         # reliable sample is kept until every matched reader (the node's among them) acks it.
         if not pub.wait_for_all_acked(Duration(seconds=min(timeout_s, 5.0))):
@@ -272,7 +331,7 @@ class RigCommander(Node):
             msg = self.latest(f'state:{axis}', since)
             return msg is not None and abs(msg.position[0] - position_m) <= tolerance_m and \
                 abs(msg.velocity[0]) < 1e-4
-        if self._wait(there, timeout_s):
+        if wait_for(there, timeout_s):
             return Result(Outcome.DONE, f'{axis} at {position_m * 1e3:.3f} mm')
         msg = self.latest(f'state:{axis}')
         where = f'{msg.position[0] * 1e3:.3f} mm' if msg is not None else 'unknown'
@@ -293,7 +352,7 @@ class RigCommander(Node):
 
     def estop(self, on, timeout_s=5.0):
         """Publish the latched estop state once the rig subscribes to it."""
-        if not self._wait(lambda: self.estop_pub.get_subscription_count() > 0, timeout_s):
+        if not wait_for(lambda: self.estop_pub.get_subscription_count() > 0, timeout_s):
             return Result(Outcome.TIMED_OUT, f'no subscriber to {contract.ESTOP.name} in '
                           f'{timeout_s:g} s: is the rig up?')
         self.estop_pub.publish(Bool(data=bool(on)))
@@ -323,7 +382,7 @@ class RigCommander(Node):
             return Result(Outcome.TIMED_OUT, 'player_node has no parameter services: is it up?')
         future = self.player_params.set_parameters(
             [Parameter(name, value=value) for name, value in values.items()])
-        if not self._wait(future.done, timeout_s):
+        if not wait_for(future.done, timeout_s):
             return Result(Outcome.TIMED_OUT, 'player_node did not answer the parameters')
         refused = [f'{name}: {r.reason}' for name, r in zip(values, future.result().results)
                    if not r.successful]
@@ -345,10 +404,10 @@ class RigCommander(Node):
 
     def run_state(self, since=-math.inf):
         """Return (phase, message) of the player's latest status, or None."""
-        status = self.latest('player', since)
+        status = self.status('player_node: run', since)
         if status is None:
             return None
-        return {v.key: v.value for v in status.values}.get('phase', ''), status.message
+        return status.values.get('phase', ''), status.message
 
     def wait_for_run(self, timeout_s=600.0, on_progress=None, since=None):
         """
@@ -379,7 +438,7 @@ class RigCommander(Node):
         def ready():
             state = self.run_state()
             return state is not None and (state[0] != 'idle' or state[1] == 'ready')
-        if self._wait(ready, timeout_s):
+        if wait_for(ready, timeout_s):
             return Result(Outcome.DONE, 'the player is ready')
         state = self.run_state()
         return Result(Outcome.TIMED_OUT, f'player_node: {state[1] if state else "not heard"} '

@@ -6,6 +6,7 @@ Ctrl-C during the stop, and a node that dies on its own.
 """
 
 import os
+import pathlib
 import signal
 import subprocess
 import threading
@@ -94,6 +95,10 @@ def test_sim_up_a_recorded_run_then_down_player_and_drivers_first(tmp_path, scri
                  '--device-dir', tmp_path / 'dev', '--logs', tmp_path / 'logs')
     assert rig.up(), rig.text()
     assert 'DDS discovery LOCALHOST' in rig.text()
+    # Camera frames between processes over a large shared-memory segment (the table's env).
+    environ = pathlib.Path(f'/proc/{rig.pid("sim_node")}/environ').read_bytes().split(b'\0')
+    assert f'FASTRTPS_DEFAULT_PROFILES_FILE={ROOT}/config/fastdds_large_images.xml'.encode() \
+        in environ
     # Driven from another terminal, as a lab user would: the devices say it happened.
     for args in (('home',), ('background',), ('play', '--mode', 'closed_loop')):
         done = command(*args)

@@ -237,6 +237,12 @@ class Player:
             return Command(self.field_t, {}, said=['done: every step played'])
         return self._command_step(now, self.index + 1, '')
 
+    def dwell_left_s(self, now):
+        """Return the time, s, until the dwell at this step is over; None when not dwelling."""
+        if not self.running or self.phase is not Phase.DWELL:
+            return None
+        return self.since + self.settings.dwell_s - now
+
     def adjust_field(self, field_t):
         """
         Hold a corrected field for the step dwelling now (a closed loop); carried on.

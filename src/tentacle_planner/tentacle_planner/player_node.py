@@ -124,6 +124,8 @@ class PlayerNode(Node):
                     lambda req, res, v=verb: self.on_service(v, res))
         self.coils_params = AsyncParameterClient(self, self.p['coils_node'])
         self.create_timer(TICK_S, self.tick)
+        # A dwell ends between two ticks: this one-shot ends it on time, not up to a tick late.
+        self._dwell_timer = self.create_timer(TICK_S, self._dwell_over, autostart=False)
         self.create_timer(1.0 / self.p['progress_rate'], self.publish_progress)
         self._ticks = 0   # housekeeping runs at 5 Hz; coils_node's limits are asked every 1 s
         self.create_timer(0.2, self.housekeeping)
@@ -165,6 +167,7 @@ class PlayerNode(Node):
         """Keep the field read back, T."""
         self.seen.field_t = np.array([msg.vector.x, msg.vector.y, msg.vector.z])
         self.seen.field_at = time.monotonic()
+        self._arrival_check()
 
     def on_state(self, axis, msg):
         """Keep a stage's position, m, and velocity, m/s."""
@@ -172,6 +175,13 @@ class PlayerNode(Node):
             self.seen.positions_m[axis] = float(msg.position[0])
             self.seen.velocities_m_s[axis] = float(msg.velocity[0]) if msg.velocity else 0.0
             self.seen.positions_at[axis] = time.monotonic()
+            self._arrival_check()
+
+    def _arrival_check(self):
+        # A step's arrival is seen on the reading that shows it, not up to a tick later: the
+        # dwell, and so the step, starts that much sooner.
+        if self.player is not None and self.player.phase is Phase.MOVING:
+            self.tick()
 
     def on_estop(self, msg):
         """Keep the estop's state."""
@@ -308,7 +318,13 @@ class PlayerNode(Node):
             return
         self.seen.faults = self.faults()
         busy = self.looping() and not self.gate.converged
-        self.apply(self.player.update(time.monotonic(), self.seen, busy))
+        now = time.monotonic()
+        self.apply(self.player.update(now, self.seen, busy))
+        left = self.player.dwell_left_s(now)
+        if not busy and left is not None and 0.0 < left < TICK_S and \
+                self._dwell_timer.is_canceled():
+            self._dwell_timer.timer_period_ns = int(left * 1e9)
+            self._dwell_timer.reset()
         if self.player.phase is not self._phase:
             self._phase = self.player.phase
             if self._phase is Phase.DWELL:
@@ -322,6 +338,10 @@ class PlayerNode(Node):
             self.get_logger().info(f'{self.player.phase.value}: the field reads zero ('
                                    f'{np.abs(self.seen.field_t).max() * 1e3:.3f} mT): no '
                                    'longer commanding the coils')
+
+    def _dwell_over(self):
+        self._dwell_timer.cancel()
+        self.tick()
 
     def apply(self, command):
         """Send a Command: the targets, the field (on change and at hold_rate), stops."""
@@ -411,6 +431,8 @@ class PlayerNode(Node):
         if not correction.converged:
             self.apply(self.player.adjust_field(correction.field_t))
         self.gate.corrected(now, self.player.index, latency, correction.converged)
+        if correction.converged:   # the dwell was held for the loop: it may end now
+            self.tick()
 
     # -- reports ------------------------------------------------------------------------
     def tracked_errors(self):

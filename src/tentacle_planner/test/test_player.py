@@ -260,3 +260,14 @@ def test_a_run_needs_steps_and_can_start_once():
     player.start(0.0, Seen())
     with pytest.raises(ValueError, match='start a new run'):
         player.start(1.0, Seen())
+
+
+def test_the_dwell_left_counts_down_from_the_arrival_and_is_none_otherwise():
+    player, rig = started(settings=Settings(dwell_s=0.25))
+    assert player.dwell_left_s(0.0) is None                     # moving
+    now, _ = run(player, rig, 10.0, stop_at=(Phase.DWELL,))
+    arrived = player.since
+    assert player.dwell_left_s(arrived) == pytest.approx(0.25)
+    assert player.dwell_left_s(arrived + 0.2) == pytest.approx(0.05)
+    player.pause(now)
+    assert player.dwell_left_s(now) is None                     # paused: nothing to end

@@ -12,7 +12,8 @@ by the driver's last line), then the watchers, then the simulator. scripts/rig r
 tests and benches start the rig with it too, so the table they test is the one a lab runs.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+import os
 import pathlib
 import signal
 import sys
@@ -28,6 +29,9 @@ CONFIRMED = {'coils_node': 'outputs zero and off', 'inserter_node': 'axis stoppe
              'backbone_node': 'axis stopped',   # the line a driver ends with when safe
              'recorder_node': 'recording closed'}   # ... and the recorder with its bag whole
 DRIVER_STOP_S = 40.0   # a ramp to zero at the slowest slew, and its read-back
+# Fast DDS with a 64 MB shared-memory segment: camera frames (3 MB) between processes in a
+# third of the time of the default transports (bench/README.md, vision_speed.py).
+TRANSPORT_PROFILE = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'config/fastdds_large_images.xml')
 
 
 @dataclass(frozen=True)
@@ -38,6 +42,7 @@ class Entry:
     module: str               # run as python -m module
     args: tuple = ()          # after the module: --ros-args ...
     role: str = 'driver'      # 'commander', 'driver' (confirmed), 'watcher', 'recorder', 'sim'
+    env: tuple = ()           # (name, value) pairs set for the process (unless already set)
 
 
 def _ros_args(params_file, node_name=None, **overrides):
@@ -96,7 +101,8 @@ def sim_table(scene_file, root, device_dir=None, tracker=True, schedule=None, pl
                            _ros_args(sim_dir / 'tracker.yaml', **_camera_of(sim_params),
                                      **ports.get('tracker', {})),
                            'watcher'))
-    return table + run_entries(root, sim_dir / 'player.yaml', schedule, player, record)
+    return with_transport(table + run_entries(root, sim_dir / 'player.yaml', schedule, player,
+                                              record), root)
 
 
 def run_entries(root, player_params, schedule=None, player=None, record=None):
@@ -129,7 +135,8 @@ def real_table(config_dir, root=None, schedule=None, player=None, record=None):
     coils.yaml (coils_node), inserter.yaml (inserter_node), backbone.yaml (backbone_node),
     camera.yaml (camera_node), tracker.yaml (tracker_node); with a schedule, player_node on
     player.yaml (the lab's: its limits and its tentacle file); with ``record``, recorder_node
-    on the project's config/recorder.yaml (``root``).
+    on the project's config/recorder.yaml (``root``). With ``root``, every process runs on
+    its Fast DDS profile for camera frames (``with_transport``).
 
     :raises FileNotFoundError: the folder has none of the drivers' files, or a schedule is
         given without player.yaml
@@ -151,7 +158,15 @@ def real_table(config_dir, root=None, schedule=None, player=None, record=None):
         raise FileNotFoundError(f'{folder}: no player.yaml to play a schedule with (copy '
                                 'config/sim/player.yaml and set the tentacle file and limits '
                                 'of this rig)')
-    return table + run_entries(root, folder / 'player.yaml', schedule, player, record)
+    table += run_entries(root, folder / 'player.yaml', schedule, player, record)
+    return table if root is None else with_transport(table, root)
+
+
+def with_transport(table, root):
+    """Return the table with every process on the project's Fast DDS profile (under root)."""
+    name, relative = TRANSPORT_PROFILE
+    return [replace(entry, env=((name, str(pathlib.Path(root) / relative)),))
+            for entry in table]
 
 
 class RigError(RuntimeError):
@@ -180,7 +195,8 @@ class Rig:
         try:
             for entry in table:
                 process = NodeProcess([sys.executable, '-m', entry.module, *entry.args],
-                                      str(self.log_dir / f'{entry.name}.log'), cwd)
+                                      str(self.log_dir / f'{entry.name}.log'), cwd,
+                                      {**dict(entry.env), **os.environ})
                 self.processes.append((entry, process))
                 say(f'rig: started {entry.name} (pid {process.popen.pid})')
                 self._wait_running(entry, process, ready_timeout_s, cancelled)

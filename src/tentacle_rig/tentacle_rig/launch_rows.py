@@ -13,14 +13,17 @@ ROS_ARGS = '--ros-args'
 
 
 def launch_row(entry):
-    """Return {package, executable, ros_arguments} of one bringup.Entry."""
+    """Return {package, executable, ros_arguments[, additional_env]} of one bringup.Entry."""
     package, _, executable = entry.module.partition('.')
     if not executable or '.' in executable:
         raise ValueError(f'{entry.name}: module {entry.module!r} is not package.executable')
     args = list(entry.args)
     if args and args[0] != ROS_ARGS:
         raise ValueError(f'{entry.name}: arguments before {ROS_ARGS}: {args}')
-    return {'package': package, 'executable': executable, 'ros_arguments': args[1:]}
+    row = {'package': package, 'executable': executable, 'ros_arguments': args[1:]}
+    if entry.env:
+        row['additional_env'] = dict(entry.env)
+    return row
 
 
 def launch_rows(table):

@@ -31,6 +31,18 @@ def test_every_row_is_an_installed_executable_with_the_tables_ros_arguments(tabl
         assert ['--ros-args', *row['ros_arguments']] == list(entry.args)
 
 
+def test_every_process_runs_on_the_projects_shared_memory_profile_for_frames(tmp_path):
+    profile = str(ROOT / 'config' / 'fastdds_large_images.xml')
+    lab = tmp_path / 'lab'
+    lab.mkdir()
+    (lab / 'camera.yaml').write_text('{}\n')
+    for table in (sim_table(SCENE, ROOT), real_table(lab, ROOT)):
+        assert all(row['additional_env'] == {'FASTRTPS_DEFAULT_PROFILES_FILE': profile}
+                   for row in launch_rows(table))
+    assert pathlib.Path(profile).is_file()
+    assert 'additional_env' not in launch_rows(real_table(lab))[0]   # no project: no profile
+
+
 def test_a_row_that_cannot_be_launched_is_refused():
     with pytest.raises(ValueError, match='not package.executable'):
         launch_row(Entry('x', 'tentacle_rig', ('--ros-args',)))

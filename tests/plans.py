@@ -22,3 +22,23 @@ def short_duct(folder, steps_mm=(4, 8)):
     result = plan_scene(load_scene(scene_file), starts=1, iterations=30)
     assert not result.flags, result.flags
     return scene_file, write_schedule_file(folder, result)
+
+
+def short_ch6(folder, steps=6, mismatch=None):
+    """
+    Return (scene file, schedule file): thesis chapter 6's coiling, its first backbone steps.
+
+    The backbone withdrawn 2.5 mm a step from 77.5 mm: six steps coil the strip to about
+    100 deg. ``mismatch``: the scene's mismatch (the simulated rig unlike the plan).
+    """
+    document = yaml.safe_load((ROOT / 'config/scenes/ch6_coiling.yaml').read_text())
+    if mismatch:
+        document['mismatch'] = mismatch
+    document.update(name=f'ch6_coiling_{steps}_steps',
+                    backbone_steps_m=document['backbone_steps_m'][:steps],
+                    tentacle=str(ROOT / 'config/tentacles/vsr_chapter6_80mm.yaml'))
+    scene_file = folder / f'{document["name"]}.yaml'
+    scene_file.write_text(yaml.safe_dump(document))
+    result = plan_scene(load_scene(scene_file), starts=1, iterations=30)
+    assert not result.flags, result.flags
+    return scene_file, write_schedule_file(folder, result)

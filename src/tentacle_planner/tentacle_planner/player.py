@@ -161,16 +161,17 @@ class Player:
     def _command_step(self, now, index, line):
         self.index, self.phase, self.reason = index, Phase.MOVING, ''
         step = self.step
-        self.field_t = self.field_limit(step.field_t + self.bias_t)
+        # A zero field is off, not a place to carry a correction to: a retraction ends at zero.
+        self.field_t = self.field_limit(step.field_t + self.bias_t) if np.any(step.field_t) \
+            else np.zeros(3)
         self._targets = dict(step.targets_m)
         self.since = self._sent_at = now
         self._deadline = now + self._expected_move_s() + self.settings.settle_timeout_s
         return Command(self.field_t, self._targets, said=[line] if line else [])
 
     def _expected_move_s(self):
-        if self.index == 0:
-            return 0.0
-        before = self.steps[self.index - 1].targets_m
+        # From where the run starts to its first step too: ch6's first step inserts 80 mm.
+        before = self.start_m if self.index == 0 else self.steps[self.index - 1].targets_m
         return max((abs(t - before.get(a, t)) for a, t in self._targets.items()),
                    default=0.0) / self.settings.speed_m_s
 

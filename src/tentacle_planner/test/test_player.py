@@ -271,3 +271,21 @@ def test_the_dwell_left_counts_down_from_the_arrival_and_is_none_otherwise():
     assert player.dwell_left_s(arrived + 0.2) == pytest.approx(0.05)
     player.pause(now)
     assert player.dwell_left_s(now) is None                     # paused: nothing to end
+
+
+def test_a_first_step_far_from_the_start_has_its_move_time_to_arrive():
+    far = Schedule([Step(0.08, (0.0, 0.002, 0.0)), Step(0.081, (0.0, 0.004, 0.0))])
+    player, rig = started(far, Settings(settle_timeout_s=2.0, speed_m_s=0.005))
+    end, said = run(player, rig, 30.0)
+    assert player.phase is Phase.DONE, said      # 16 s of move, not paused after 2 s
+    assert end > 16.0
+
+
+def test_a_retraction_ends_at_zero_field_whatever_correction_it_carried():
+    player, rig = started(retract=True)
+    run(player, rig, 10.0, stop_at=(Phase.DWELL,))
+    rig.apply(player.adjust_field(player.field_t + np.array([0.0, 0.001, 0.0])))
+    assert np.any(player.bias_t)                   # carried to the later steps ...
+    run(player, rig, 30.0)
+    assert player.phase is Phase.DONE
+    assert not np.any(player.field_t) and not np.any(rig.command_t)   # ... but not to zero

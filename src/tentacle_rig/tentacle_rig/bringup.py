@@ -48,9 +48,7 @@ class Entry:
 def _ros_args(params_file, node_name=None, **overrides):
     args = ['--ros-args', *(('-r', f'__node:={node_name}') if node_name else ()),
             '--params-file', str(params_file)]
-    for name, value in overrides.items():
-        args += ['-p', f'{name}:={value}']
-    return tuple(args)
+    return tuple(args) + _parameter_args(overrides)
 
 
 def scene_has_backbone(scene_file):
@@ -160,6 +158,16 @@ def real_table(config_dir, root=None, schedule=None, player=None, record=None):
                                 'of this rig)')
     table += run_entries(root, folder / 'player.yaml', schedule, player, record)
     return table if root is None else with_transport(table, root)
+
+
+def with_overrides(table, overrides):
+    """Return the table with more parameters for some nodes: {node name: {name: value}}."""
+    return [replace(entry, args=entry.args + _parameter_args(overrides.get(entry.name, {})))
+            for entry in table]
+
+
+def _parameter_args(values):
+    return tuple(arg for name, value in values.items() for arg in ('-p', f'{name}:={value}'))
 
 
 def with_transport(table, root):

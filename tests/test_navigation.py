@@ -118,7 +118,9 @@ def progress_steps(bag):
 def started_to_step(commander, step):
     """Start a run and wait until it plays a step (1-based)."""
     assert commander.player('start')
-    assert wait_for(lambda: (p := commander.progress()) is not None and p.step >= step, 20.0)
+    since = time.monotonic()   # not the step an earlier run ended at
+    assert wait_for(lambda: (p := commander.progress(since)) is not None and p.step >= step,
+                    20.0)
 
 
 def back_to_start(commander, devices):

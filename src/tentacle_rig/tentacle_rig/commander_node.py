@@ -393,9 +393,9 @@ class RigCommander(Node):
         """Call the player's service of a verb: start, retract, pause, resume or abort."""
         return self._call(contract.player_service(verb), Trigger.Request(), timeout_s)
 
-    def progress(self):
-        """Return the latest Progress, or None."""
-        msg = self.latest('progress')
+    def progress(self, since=-math.inf):
+        """Return the latest Progress received after a monotonic time, or None."""
+        msg = self.latest('progress', since)
         if msg is None:
             return None
         values = dict(zip(msg.name, msg.position))
@@ -419,7 +419,7 @@ class RigCommander(Node):
         since = time.monotonic() if since is None else since
         deadline, last = time.monotonic() + timeout_s, None
         while True:
-            progress = self.progress()
+            progress = self.progress(since)
             if on_progress is not None and progress is not None and progress != last:
                 on_progress(progress)
                 last = progress

@@ -58,7 +58,7 @@ LOOP_PARAMS = (
           "error is measured) or planned (the step's planned centreline)"),
     Param('loop_min_inserted', 0.003, 'the loop acts from this inserted length on (shorter, '
           'the camera sees too little of the body), metre', 0.0, 1.0),
-    Param('loop_rate', 15.0, 'the most corrections per second, hertz', 0.1, 100.0),
+    Param('loop_rate', 30.0, 'the most corrections per second, hertz', 0.1, 100.0),
     Param('loop_settle_s', 0.02, 'a frame counts once taken this long after the last field '
           'command (the coils slewing), second', 0.0, 5.0),
     Param('gain', 1.0, 'closed_loop: the fraction of the Gauss-Newton step taken', 0.0, 1.0),

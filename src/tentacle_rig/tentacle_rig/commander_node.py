@@ -222,10 +222,10 @@ class RigCommander(Node):
         return None if msg is None else np.array([msg.vector.x, msg.vector.y, msg.vector.z])
 
     def _field_publisher(self):
-        with self._lock:
-            if self.field_pub is None:
-                self.field_pub = publisher(self, contract.FIELD_CMD)
-            return self.field_pub
+        # Under self._lock.
+        if self.field_pub is None:
+            self.field_pub = publisher(self, contract.FIELD_CMD)
+        return self.field_pub
 
     def _send_field(self, field_t=None, frame_id=contract.COILS_FRAME, renew=False):
         # Under the lock: release_field may destroy the publisher from another thread, and a
@@ -238,9 +238,7 @@ class RigCommander(Node):
             msg.header.stamp = self.get_clock().now().to_msg()
             msg.header.frame_id = frame_id
             msg.vector.x, msg.vector.y, msg.vector.z = (float(v) for v in field_t)
-            if self.field_pub is None:
-                self.field_pub = publisher(self, contract.FIELD_CMD)
-            self.field_pub.publish(msg)
+            self._field_publisher().publish(msg)
 
     def send_field(self, field_t, frame_id=contract.COILS_FRAME):
         """
@@ -252,7 +250,9 @@ class RigCommander(Node):
 
     def wait_for_coils(self, timeout_s=10.0):
         """Wait until coils_node is matched to this node's field commands."""
-        if self._matched(self._field_publisher(), COILS_NODE, timeout_s):
+        with self._lock:
+            pub = self._field_publisher()
+        if self._matched(pub, COILS_NODE, timeout_s):
             return Result(Outcome.DONE, f'{COILS_NODE} takes field commands')
         return Result(Outcome.TIMED_OUT, f'{COILS_NODE} does not subscribe to '
                       f'{contract.FIELD_CMD.name} after {timeout_s:g} s: is the rig up?')

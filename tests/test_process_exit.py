@@ -58,6 +58,22 @@ NODE = HOLD + textwrap.dedent("""
              lambda node: 'stopped')
 """)
 
+SLOW = textwrap.dedent("""
+    import sys
+    import time
+
+    from tentacle_common.driver_node import run_node
+
+
+    def make_node():
+        print('building', flush=True)
+        time.sleep(60.0)   # a node still opening its devices
+
+
+    run_node(sys.argv[2:], 'slow_probe', [], 'a node slow to build\\n', make_node,
+             lambda node: 'stopped')
+""")
+
 CHILD = HOLD + textwrap.dedent("""
     from tentacle_common.child_process import child_main
 
@@ -147,6 +163,21 @@ def test_a_sigterm_while_a_driver_child_finalises_leaves_a_clean_exit():
         line_from(proc, FINALISING)
         proc.send_signal(signal.SIGTERM)
         assert release_and_wait(proc, hold) == 0, proc.stderr.read()
+    finally:
+        proc.kill()
+        proc.wait()
+        os.close(hold)
+
+
+def test_a_signal_while_the_node_is_built_is_not_a_clean_exit():
+    proc, hold = started(SLOW)
+    try:
+        line_from(proc, 'building')
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(20) == 130          # no node: nothing it could confirm safe
+        err = proc.stderr.read()
+        assert 'slow_probe: interrupted while starting: no safe stop confirmed' in err, err
+        assert 'Traceback' not in err
     finally:
         proc.kill()
         proc.wait()

@@ -268,7 +268,7 @@ def run_node(argv, node_name, table, doc, make_node, stop_safely):
     :param make_node: returns the node (raising DriverError or ParameterException: exit 2)
     :param stop_safely: node -> the line printed at exit ('<node_name>: <line>'), after the
         actuators were brought to their safe state, read back; '<node_name>: running' is
-        printed once the node is built and spins
+        printed once the node is built and spins; a signal while it is built exits 130
     """
     if wants_help(argv):
         print(f'usage: {node_name} [--ros-args --params-file FILE | -p NAME:=VALUE ...'
@@ -292,7 +292,11 @@ def run_node(argv, node_name, table, doc, make_node, stop_safely):
         print(f'{node_name}: running', file=sys.stderr, flush=True)
         spin_until_signal(node)
     except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        if node is None:   # interrupted while being built: no safe stop to confirm, say so
+            ignore_further_signals(node_name)
+            print(f'{node_name}: interrupted while starting: no safe stop confirmed',
+                  file=sys.stderr, flush=True)
+            sys.exit(130)
     except (DriverError, ParameterException) as exc:
         print(f'{node_name}: not started: {exc}', file=sys.stderr)
         sys.exit(2)

@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 from scipy.optimize import least_squares, minimize
+from tentacle_planner.clearance import link_gap_gradients
 
 MILLITESLA = 1e-3  # field unknowns are in mT: of the order of the angles, for the optimiser
 MIN_STABILITY_MARGIN = 0.1
@@ -32,6 +33,7 @@ eigenvalue at a step over that of the straight, unloaded body (its stiffness alo
 STABILITY_WEIGHT = 0.1  # the penalty at zero margin: as much as a shape error of 10% of L
 STAGE_GOOD = 1e-6       # a stage of the insertion-order start this close needs no more tries
 MARGIN_STEP = 1e-4      # forward-difference step of the margin's derivative (rad, mT)
+KEEP_OFF_WEIGHT = 10.0  # a link this far inside the margin costs 10 times the shape error
 
 
 @dataclass(frozen=True)
@@ -45,6 +47,16 @@ class Constraints:
     max_neighbour_angle_rad: float | None = None
     distal_axial: bool = False                # the tip segment magnetised along its axis
     tip_driven: bool = False                  # every segment axial: fields only (baseline)
+
+
+@dataclass(frozen=True)
+class KeepOff:
+    """Obstacles and walls a plan keeps its body off, by a margin, m (scene.Sphere, Wall)."""
+
+    spheres: tuple = ()
+    walls: tuple = ()
+    margin_m: float = 2e-4
+    weight: float = KEEP_OFF_WEIGHT
 
 
 @dataclass(frozen=True)
@@ -88,7 +100,7 @@ class Problem:
 
     def __init__(self, model, steps_m, targets_m, constraints=Constraints(),
                  directions=None, start=None, free=None, min_margin=MIN_STABILITY_MARGIN,
-                 backbones_m=None):
+                 backbones_m=None, keep_off=None):
         """
         Set up the problem.
 
@@ -104,6 +116,8 @@ class Problem:
         :param min_margin: the stability margin under which a step is penalised (0: never)
         :param backbones_m: per step, how far the backbone reaches past the base, m (default:
             the model's own at every step)
+        :param keep_off: a KeepOff: each link's gap to each of its obstacles and walls under
+            the margin adds a residual, weight (margin - gap) / (L sqrt(steps)); None: none
         """
         self.model, self.constraints = model, constraints
         self.steps_m = [float(s) for s in steps_m]
@@ -132,6 +146,10 @@ class Problem:
         # Each link's moment magnitude is fixed; its direction is its segment's.
         self._magnitudes = {s: np.linalg.norm(model.chain(s).moments_a_m2, axis=1)
                             for s in self.steps_m}
+        self.keep_off = keep_off if keep_off and (keep_off.spheres or keep_off.walls) else None
+        self._radii = {s: np.array([model.spec.segments[i].radius_m
+                                    for i in model.chain(s).segment_index])
+                       for s in self.steps_m}
         self.evaluations = 0
 
     # -- unknowns ---------------------------------------------------------------------------
@@ -213,26 +231,65 @@ class Problem:
         rows, jacobians = [], []
         for k, (solution, target, field_t) in enumerate(zip(solutions, self.targets, fields)):
             weight = 1.0 / (self.length_m * math.sqrt(len(self.steps_m) * len(target)))
-            jac = np.zeros((target.size + 1, self.size))
+            keep_off = self._keep_off_rows(k, solution)
+            jac = np.zeros((target.size + 1 + len(keep_off[0]), self.size))
             if not solution.equilibrium.converged or not np.all(np.isfinite(solution.points_m)):
-                rows.append(np.full(target.size + 1, 10.0))  # outside what the rig can rely on
-                jacobians.append(jac)
+                rows.append(np.concatenate([np.full(target.size + 1, 10.0),
+                                            np.zeros(len(keep_off[0]))]))
+                jacobians.append(jac)   # outside what the rig can rely on
                 continue
             penalty, d_penalty = self._stability_penalty(k, solution, field_t, x, jacobian)
-            rows.append(np.append(weight * (solution.points_m - target).reshape(-1), penalty))
+            rows.append(np.concatenate([weight * (solution.points_m - target).reshape(-1),
+                                        [penalty], keep_off[0]]))
             if not jacobian:
                 continue
-            jac[-1] = d_penalty
+            # The shape's rows scaled as they always were: a plan depends on the last bit of
+            # its Jacobian (bile_duct: 1.2% or 3.5% of L from a 7e-18 difference).
             d_field = self.model.field_sensitivity(solution, field_t).points.reshape(-1, 3)
-            d_field = d_field * (weight * MILLITESLA)
-            if self.field_size == 2:
-                d_field = d_field @ self.base_plane
-            start = n_dir + k * self.field_size
-            jac[:-1, start:start + self.field_size] = d_field
+            columns = slice(n_dir + k * self.field_size, n_dir + (k + 1) * self.field_size)
+            jac[:target.size, columns] = self._field_columns(d_field, weight * MILLITESLA)
             if n_dir:
-                jac[:-1, :n_dir] = weight * self._direction_jacobian(solution, field_t, x)
+                d_direction = self._direction_jacobian(solution, field_t, x)
+                jac[:target.size, :n_dir] = weight * d_direction
+            jac[target.size] = d_penalty
+            if len(keep_off[0]):   # by the points, d points / dx
+                points_by = np.zeros((target.size, self.size))
+                points_by[:, columns] = self._field_columns(d_field, MILLITESLA)
+                if n_dir:
+                    points_by[:, :n_dir] = d_direction
+                jac[target.size + 1:] = keep_off[1] @ points_by
             jacobians.append(jac)
         return np.concatenate(rows), np.vstack(jacobians) if jacobian else None
+
+    def _field_columns(self, d_field, scale):
+        """Return d points / d this step's field unknowns from d points / d field (T)."""
+        d_field = d_field * scale
+        return d_field @ self.base_plane if self.field_size == 2 else d_field
+
+    def _keep_off_rows(self, k, solution):
+        """
+        Return (r, dr/d points ((n + 1) 3 columns)) of step k's keep-off residuals.
+
+        One per link and obstacle or wall: weight (margin - gap) / (L sqrt(steps)) where the
+        gap is under the margin, else 0 (a smooth square in the objective).
+        """
+        n_points = len(self._radii[solution.inserted_m]) + 1
+        if self.keep_off is None:
+            return np.zeros(0), np.zeros((0, 3 * n_points))
+        off = self.keep_off
+        if not np.all(np.isfinite(solution.points_m)):
+            count = (n_points - 1) * (len(off.spheres) + len(off.walls))
+            return np.zeros(count), np.zeros((count, 3 * n_points))
+        gaps, gradients = link_gap_gradients(solution.points_m, self._radii[solution.inserted_m],
+                                             off.spheres, off.walls)
+        scale = off.weight / (self.length_m * math.sqrt(len(self.steps_m)))
+        inside = gaps < off.margin_m
+        r = np.where(inside, scale * (off.margin_m - gaps), 0.0).reshape(-1)
+        d_r = np.zeros((gaps.shape[0], gaps.shape[1], n_points, 3))
+        links = np.arange(gaps.shape[0])
+        d_r[links, :, links] = -scale * gradients[:, :, 0] * inside[..., None]
+        d_r[links, :, links + 1] = -scale * gradients[:, :, 1] * inside[..., None]
+        return r, d_r.reshape(len(r), 3 * n_points)
 
     def margin(self, solution, field_t):
         """Return a step's stability margin: its 3-DoF stability over the unloaded body's."""

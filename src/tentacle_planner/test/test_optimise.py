@@ -181,3 +181,53 @@ def test_the_fields_of_a_backbone_schedule_are_recovered():
     assert plan.shape_rms_m < 1e-8 and plan.flags == []
     np.testing.assert_allclose(problem.pack(plan.directions, plan.fields_t), x_true, atol=1e-5)
     assert [s.backbone_m for s in plan.steps] == backbones
+
+
+def obstacle_on(points, link, off_m, radius_m):
+    """Return a Sphere beside a link's middle, off_m from its axis surface to surface."""
+    from tentacle_planner.scene import Sphere
+    a, b = points[link], points[link + 1]
+    side = np.cross(b - a, [0.0, 0.0, 1.0])
+    side /= np.linalg.norm(side)
+    return Sphere((a + b) / 2 + side * (off_m + radius_m), radius_m)
+
+
+@pytest.mark.parametrize('dof', [1, 3])
+def test_the_keep_off_gradient_is_exact(braided, dof):
+    from tentacle_planner.optimise import KeepOff
+    constraints = Constraints(planar_magnetisation=dof == 1)
+    model, x, targets = known_plan(braided, dof, constraints)
+    near = obstacle_on(targets[2], 3, 0.0005, 0.002)   # the link's axis 0.5 mm off its surface
+    keep_off = KeepOff(spheres=(near,), margin_m=0.002)
+    # No stability penalty: its derivative is a forward difference, not exact.
+    problem = Problem(model, STEPS_M, targets, constraints, keep_off=keep_off, min_margin=0)
+    y = x + np.random.default_rng(5).normal(0.0, 0.05, problem.size)
+    plain = Problem(model, STEPS_M, targets, constraints, min_margin=0)
+    value, gradient = problem.objective(y)
+    assert value > plain.objective(y)[0] + 1e-6                 # within the margin: it counts
+    fd = central_gradient(problem, y, 1e-6)
+    assert gradient == pytest.approx(fd, abs=1e-6 * np.abs(fd).max())
+
+
+def test_a_plan_that_keeps_off_moves_clear_of_an_obstacle_the_exact_one_runs_into(braided):
+    from tentacle_planner.clearance import clearance
+    from tentacle_planner.optimise import fit, KeepOff
+    constraints = Constraints(planar_magnetisation=True)
+    model, x, targets = known_plan(braided, 1, constraints)
+    radii = [braided.segments[i].radius_m for i in model.chain(STEPS_M[2]).segment_index]
+    # A ball the exact plan's body runs 0.2 mm into at the third step.
+    ball = obstacle_on(targets[2], 3, -0.0002 - radii[3], 0.002)
+    unaware = Problem(model, STEPS_M, targets, constraints)
+    aware = Problem(model, STEPS_M, targets, constraints,
+                    keep_off=KeepOff(spheres=(ball,), margin_m=2e-4))
+
+    def least_gap(problem, solution):
+        return min(clearance(s.points_m, [braided.segments[i].radius_m
+                                          for i in s.chain.segment_index], [ball])[0]
+                   for s in problem.simulate(solution))
+    exact = fit(unaware, x)
+    kept = fit(aware, x)
+    assert least_gap(unaware, exact) < -1e-4                   # touches: 0.2 mm in
+    assert least_gap(aware, kept) > 0.0                        # keeps off
+    rms = math.sqrt(unaware.objective(kept)[0])                # what keeping off costs
+    assert rms < 0.05

@@ -286,6 +286,13 @@ class Player:
             raise ValueError(f'not resumed: {fault}')
         return self._command_step(now, self.index, f'resumed at step {self.step.index}')
 
+    def zero_read_back(self, seen):
+        """Return whether a finished run's zero field reads back, after it was sent (release)."""
+        return self.phase in (Phase.ABORTED, Phase.DONE) and self.field_t is not None and \
+            not np.any(self.field_t) and seen.field_t is not None and \
+            seen.field_at > self.since and \
+            np.abs(seen.field_t).max() <= self.settings.field_tolerance_t
+
     def release(self):
         """
         Stop commanding the field: once an aborted run's (or a retraction's) zero is read back.

@@ -329,11 +329,7 @@ class PlayerNode(Node):
             self._phase = self.player.phase
             if self._phase is Phase.DWELL:
                 self.gate.dwell_began(self.get_clock().now().nanoseconds * 1e-9)
-        finished_at_zero = self.player.phase in (Phase.ABORTED, Phase.DONE) and \
-            self.player.field_t is not None and not np.any(self.player.field_t)
-        if finished_at_zero and self.seen.field_t is not None and \
-                self.seen.field_at > self.player.since and \
-                np.abs(self.seen.field_t).max() <= self.p['field_tolerance']:
+        if self.player.zero_read_back(self.seen):
             self.player.release()   # the coils are free for another commander
             self.get_logger().info(f'{self.player.phase.value}: the field reads zero ('
                                    f'{np.abs(self.seen.field_t).max() * 1e3:.3f} mT): no '

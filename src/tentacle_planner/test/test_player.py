@@ -289,3 +289,17 @@ def test_a_retraction_ends_at_zero_field_whatever_correction_it_carried():
     run(player, rig, 30.0)
     assert player.phase is Phase.DONE
     assert not np.any(player.field_t) and not np.any(rig.command_t)   # ... but not to zero
+
+
+def test_a_finished_run_lets_go_only_once_its_zero_reads_back_after_it_was_sent():
+    player, rig = started()
+    run(player, rig, 10.0, stop_at=(Phase.DWELL,))
+    assert not player.zero_read_back(rig.seen)                 # running
+    command = player.abort(rig.seen.field_at, seen=rig.seen)
+    rig.apply(command)
+    assert not player.zero_read_back(rig.seen)                 # the old field, read before
+    now = rig.seen.field_at
+    while np.abs(rig.seen.field_t).max() > player.settings.field_tolerance_t:
+        now += 0.1
+        rig.advance(now, 0.1)                                  # the supplies ramp down
+    assert player.zero_read_back(rig.seen)

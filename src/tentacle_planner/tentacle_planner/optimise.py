@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 from scipy.optimize import least_squares, minimize
-from tentacle_planner.clearance import link_gap_gradients
+from tentacle_planner.clearance import link_gap_gradients, link_gaps
 
 MILLITESLA = 1e-3  # field unknowns are in mT: of the order of the angles, for the optimiser
 MIN_STABILITY_MARGIN = 0.1
@@ -454,6 +454,14 @@ class Problem:
         r = self.residuals(x, jacobian=False)[0]
         return Plan(directions, steps, float(r @ r), self.evaluations, flags)
 
+    def deepest_contact_m(self, plan):
+        """Return how far a plan's body runs into its KeepOff's obstacles and walls, m (0: not)."""
+        if self.keep_off is None:
+            return 0.0
+        gaps = [np.min(link_gaps(s.points_m, self._radii[s.inserted_m], self.keep_off.spheres,
+                                 self.keep_off.walls)) for s in plan.steps]
+        return max(0.0, -float(np.nanmin(gaps)))
+
     def violations(self, directions, fields, tolerance=1e-6):
         """Return what breaks a constraint, one line each (relative tolerance)."""
         c, out = self.constraints, []
@@ -549,8 +557,9 @@ def optimise(problem, *, seed=0, starts=8, iterations=100, initial=None, progres
             if balance is not None:
                 x0 = fit(balance, x0, iterations)
             plan = problem.plan(fit(problem, x0, iterations))
-            # A plan that relies on no unstable step and breaks no limit beats any that does.
-            key = (len(plan.flags), plan.objective)
+            # A plan that relies on no unstable step and breaks no limit beats any that does,
+            # then one that runs less deep into a wall (none: 0).
+            key = (len(plan.flags), problem.deepest_contact_m(plan), plan.objective)
             if best_key is None or key < best_key:
                 best, best_key = plan, key
             if progress is not None:

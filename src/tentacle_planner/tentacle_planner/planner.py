@@ -16,7 +16,7 @@ from tentacle_model import statics
 from tentacle_model.chain import discretise
 from tentacle_planner import paths
 from tentacle_planner.clearance import clearance
-from tentacle_planner.optimise import Constraints, optimise, Plan, Problem
+from tentacle_planner.optimise import Constraints, KeepOff, optimise, Plan, Problem
 from tentacle_planner.playback import playback
 from tentacle_planner.robustness import perturbed_problems, report, RobustProblem
 
@@ -59,9 +59,14 @@ def key_steps(scene, model):
     return steps, backbones, targets
 
 
+def keep_off(scene):
+    """Return the scene's KeepOff: its obstacles and walls, and its clearance margin."""
+    return KeepOff(scene.obstacles, scene.walls, scene.clearance_margin_m)
+
+
 def problem_of(scene, tip_driven=False):
     """
-    Return the Problem of a scene's key steps, in its planning model.
+    Return the Problem of a scene's key steps, in its planning model, kept off its walls.
 
     The scene's model, except that magnet-to-magnet interaction is left out where the
     magnetisation is planned (the moment sensitivity does not include it): such plans are
@@ -72,7 +77,7 @@ def problem_of(scene, tip_driven=False):
     steps, backbones, targets = key_steps(scene, model)
     return Problem(model, steps, targets, constraints_of(scene, tip_driven),
                    directions=scene.own_directions() if given else None,
-                   backbones_m=backbones)
+                   backbones_m=backbones, keep_off=keep_off(scene))
 
 
 def shape_rms(scene, steps):
@@ -96,6 +101,16 @@ def contact_flags(scene, steps):
             flags.append(f'the body touches {what} at {step.inserted_m * 1e3:.1f} mm inserted '
                          f'({-gap * 1e3:.2f} mm into it)')
     return flags
+
+
+def least_contact_flag(scene, steps):
+    """Return [a flag] where any step's body touches: the deepest contact, the least found."""
+    gaps = [step_clearance(scene, step) + (step.inserted_m,) for step in steps]
+    gap, what, inserted_m = min(gaps, key=lambda g: g[0], default=(math.inf, None, None))
+    if gap > 0:
+        return []
+    return [f'no plan found keeps the body off every obstacle and wall: the least penetration '
+            f'found is {-gap * 1e3:.2f} mm, into {what} at {inserted_m * 1e3:.1f} mm inserted']
 
 
 def fuller_models(scene):
@@ -219,12 +234,13 @@ def _after_search(scene, problem, nominal, seed, iterations, robust, report_prog
                 problem.model, plan, lambda chain, inserted: paths.targets(scene.path, chain,
                                                                            inserted),
                 scene.playback_step_m, problem.constraints, progress=report_progress(
-                    'playback'))
+                    'playback'), keep_off=problem.keep_off)
             key = {round(s.inserted_m, 12) for s in plan.steps}
             return steps, dense_flags + contact_flags(
                 scene, [s for s in steps if round(s.inserted_m, 12) not in key])
         dense, dense_flags = phase('dense playback (key steps only)', dense_playback, ([], []))
         flags += dense_flags
+    flags = least_contact_flag(scene, list(plan.steps) + dense) + flags
     robustness = phase('the robustness report', lambda: report(problems, nominal, error), [])
     verification, recheck_flags = phase('the re-check in fuller models',
                                         lambda: recheck(scene, plan), ([], []))

@@ -21,7 +21,8 @@ def dense_lengths(key_steps_m, step_m):
     return [float(v) for v in lengths if v > 0]
 
 
-def playback(model, plan, target, step_m, constraints, iterations=50, progress=None):
+def playback(model, plan, target, step_m, constraints, iterations=50, progress=None,
+             keep_off=None):
     """
     Return (dense Steps, flags) for a plan.
 
@@ -34,6 +35,7 @@ def playback(model, plan, target, step_m, constraints, iterations=50, progress=N
         held to that change, and flagged: the rig refuses the larger change)
     :param iterations: Gauss-Newton budget per dense step
     :param progress: called with (steps done, steps, None) after every dense step
+    :param keep_off: a KeepOff every dense step's field keeps the body off by (None: none)
     """
     key_m = np.array([s.inserted_m for s in plan.steps])
     key_fields = plan.fields_t
@@ -42,7 +44,8 @@ def playback(model, plan, target, step_m, constraints, iterations=50, progress=N
     for inserted_m in lengths:
         guess = np.array([np.interp(inserted_m, key_m, key_fields[:, axis]) for axis in range(3)])
         problem = Problem(model, [inserted_m], [target(model.chain(inserted_m), inserted_m)],
-                          constraints, directions=plan.directions, start=start)
+                          constraints, directions=plan.directions, start=start,
+                          keep_off=keep_off)
         x = fit(problem, problem.pack(plan.directions, [guess]), iterations)
         change = constraints.max_field_change_t
         if change is not None and steps:   # the rig refuses a larger change: keep within

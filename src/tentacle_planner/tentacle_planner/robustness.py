@@ -43,7 +43,8 @@ def perturbed_problems(problem):
         model = variant(problem.model, perturbed(problem.model.spec, **change))
         out.append((name, Problem(model, problem.steps_m, problem.targets,
                                   problem.constraints, problem.fixed_directions,
-                                  problem.start, backbones_m=problem.backbones_m)))
+                                  problem.start, backbones_m=problem.backbones_m,
+                                  keep_off=problem.keep_off)))
     return out
 
 

@@ -10,6 +10,7 @@ Scene files (DESIGN.md, "Scenes and schedules"): what a plan is made for, valida
     playback_step_m: 0.001                      # optional
     coil: {max_field_t: 0.020, max_total_field_t: 0.030, max_field_change_t: 0.015}
     obstacles: [{centre_m: [x, y, z], radius_m: r}]   # or {walls: [{points_m: [...]}]}
+    clearance_margin_m: 0.0002                  # optional: plans keep the body this far off
     model: {dof: 3, sublinks: 1, gravity_m_s2: [0, 0, 0], dipoles: false}
     magnetisation: {planar: false, max_neighbour_angle_deg: 60, distal_axial: false,
                     given: false}           # given: the tentacle file's directions, fields only
@@ -34,7 +35,8 @@ limit is no limit, an omitted switch is off, and the model defaults to 3-DoF joi
 per segment, no gravity, no magnet-to-magnet interaction. coil limits: max_field_t each
 axis, max_total_field_t the magnitude |B|, max_field_change_t each axis between consecutive
 steps (all T). Obstacles and walls are in
-the rig frame. Unknown keys, missing required ones, wrong types and values out of range are
+the rig frame; plans keep the body (its radius included) clearance_margin_m off them (default
+CLEARANCE_MARGIN_M, 0 for no margin: the body may then graze them). Unknown keys, missing required ones, wrong types and values out of range are
 refused naming the file and the key.
 
 The path is placed at the tentacle's base pose (paths.py) and must then be at least as long
@@ -63,8 +65,11 @@ import yaml
 
 MAX_FILE_BYTES = 64 * 1024  # as a tentacle file: PyYAML takes up to a second on this much
 TOP_KEYS = ('name', 'tentacle', 'path', 'insertion_steps_m', 'playback_step_m', 'coil',
-            'obstacles', 'model', 'magnetisation', 'backbone_steps_m', 'coiling', 'mismatch')
+            'obstacles', 'model', 'magnetisation', 'backbone_steps_m', 'coiling', 'mismatch',
+            'clearance_margin_m')
 REQUIRED_KEYS = ('tentacle', 'insertion_steps_m')
+CLEARANCE_MARGIN_M = 2e-4  # how far plans keep the body off obstacles and walls by default
+MAX_CLEARANCE_MARGIN_M = 0.01
 COIL_PATH_STEP_M = 0.25e-3  # the points of a coiling target, this far apart
 COIL_KEYS = ('max_field_t', 'max_total_field_t', 'max_field_change_t')
 MAGNETISATION_KEYS = ('planar', 'max_neighbour_angle_deg', 'distal_axial', 'given')
@@ -132,6 +137,7 @@ class Scene:
     coiling_radius_m: float | None = None   # the target coils at this radius past the backbone
     coiling_side: int = 1                   # +1: towards the base normal (link y), -1: away
     mismatch: Mismatch = Mismatch()         # how the simulated rig differs from the model
+    clearance_margin_m: float = CLEARANCE_MARGIN_M  # plans keep the body this far off, m
     _coil_paths: dict = field(default_factory=dict, repr=False)  # backbone m -> Path, built once
 
     def target_path(self, inserted_m, backbone_m=0.0):
@@ -320,8 +326,14 @@ def parse_scene(document, source, sha256=''):
         _check_clear(read, path, sphere, index)
     magnetisation = _magnetisation(read, doc.get('magnetisation', {}))
     mismatch = read_mismatch(read, doc.get('mismatch', {}))
+    margin = read.number(doc.get('clearance_margin_m', CLEARANCE_MARGIN_M),
+                         'clearance_margin_m', allow_zero=True)
+    if margin > MAX_CLEARANCE_MARGIN_M:
+        read.fail('clearance_margin_m', f'{margin:g} m is more than {MAX_CLEARANCE_MARGIN_M:g}'
+                  ' m: a margin, not a channel width')
     return Scene(name, source, sha256, tentacle_file, spec, path, steps, playback, coil,
-                 spheres, walls, model, magnetisation, backbones, *coiling, mismatch=mismatch)
+                 spheres, walls, model, magnetisation, backbones, *coiling, mismatch=mismatch,
+                 clearance_margin_m=margin)
 
 
 def _tentacle(read, value, source):

@@ -57,7 +57,7 @@ def walls(points_m, width_m, spacing_m=WALL_SPACING_M):
 
 
 def block(name, width_m, points_m):
-    """Return the scene file's obstacles block (YAML text) for a duct."""
+    """Return a duct's obstacles block for its scene file, YAML text."""
     lines = [f'# The phantom (make_duct_walls.py): an open channel {width_m * 1e3:g} mm wide, '
              f'{SOURCES[name]}.', 'obstacles:', '  walls:']
     for wall in walls(points_m, width_m):

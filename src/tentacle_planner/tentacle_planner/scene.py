@@ -34,10 +34,10 @@ Every other key is optional, and so is each key of coil, model and magnetisation
 limit is no limit, an omitted switch is off, and the model defaults to 3-DoF joints, one link
 per segment, no gravity, no magnet-to-magnet interaction. coil limits: max_field_t each
 axis, max_total_field_t the magnitude |B|, max_field_change_t each axis between consecutive
-steps (all T). Obstacles and walls are in
-the rig frame; plans keep the body (its radius included) clearance_margin_m off them (default
-CLEARANCE_MARGIN_M, 0 for no margin: the body may then graze them). Unknown keys, missing required ones, wrong types and values out of range are
-refused naming the file and the key.
+steps (all T). Obstacles and walls are in the rig frame; plans keep the body (its radius
+included) clearance_margin_m off them (default CLEARANCE_MARGIN_M; 0: the body may graze
+them). Unknown keys, missing required ones, wrong types and values out of range are refused
+naming the file and the key.
 
 The path is placed at the tentacle's base pose (paths.py) and must then be at least as long
 as the deepest insertion step, turn no more than the model's links can follow, from the clamp

@@ -22,11 +22,16 @@ def short_duct(folder, steps_mm=(4, 8)):
     """
     Return (scene file, schedule file): the pancreatic duct to its last key step, planned.
 
-    Its stated mismatch kept; played every 1 mm (the scene's playback step).
+    Its stated mismatch kept; played every 1 mm (the scene's playback step). The tentacle
+    file's magnetisation is given (the tip segment axial): on the duct's straight first
+    8 mm any direction of the tip's fits at zero field, and one across the channel's plane
+    leaves the closed loop no torque to bend the body back in it.
     """
+    whole = yaml.safe_load((ROOT / 'config/scenes/pancreatic_duct.yaml').read_text())
     return _planned(folder, 'pancreatic_duct.yaml', 'braided_chapter5.yaml',
                     name=f'pancreatic_duct_{steps_mm[-1]}mm',
-                    insertion_steps_m=[s * 1e-3 for s in steps_mm])
+                    insertion_steps_m=[s * 1e-3 for s in steps_mm],
+                    magnetisation={**whole['magnetisation'], 'given': True})
 
 
 def short_ch6(folder, steps=6, mismatch=None):

@@ -219,8 +219,10 @@ def test_a_supply_lost_mid_run_pauses_it_and_an_abort_zeroes_it_once_back(rig, r
 def test_a_schedule_for_another_tentacle_or_over_the_limits_is_refused(rig, schedule, tmp_path):
     commander, devices, _ = rig
     document = yaml.safe_load(schedule[1].read_text())
-    other = dict(document, tentacle=yaml.safe_load(
-        (ROOT / 'config/tentacles/braided_chapter5.yaml').read_text()))
+    # The rig's tentacle with its tip magnetised 90 deg off the one the plan was made for.
+    turned = yaml.safe_load((ROOT / 'config/tentacles/braided_chapter5.yaml').read_text())
+    turned['segments'][-1]['magnetisation']['direction'] = [0.0, 1.0, 0.0]
+    other = dict(document, tentacle=turned)
     strong = dict(document, steps=[dict(s, field_t=[0.0, 0.025, 0.0]) for s in
                                    document['steps']])
     unknown = dict(document, format='tentacle-schedule/99')

@@ -11,16 +11,24 @@ path), as the mean squared distance over the tentacle length squared. Its gradie
 exact: the equilibrium's sensitivities to field and moments (tentacle_model.model) chained
 onto the unknowns; an equilibrium at step k depends on the field of step k only.
 
+With a KeepOff, each link's gap to every obstacle and wall under a margin adds to it.
+
 Constraints (SLSQP): per-axis field limits, a total field limit, a largest field change
-between steps, a largest angle between neighbouring magnetisations; a distal segment held
-axial, or every segment axial (the tip-driven baseline) removes those unknowns. Global
-search is a seeded multi-start; the best plan whose every step is a stable converged
-equilibrium wins. A seed reproduces a plan exactly: budgets, not clocks, end every stage.
+between steps, a largest angle between neighbouring magnetisations (approached as weighted
+residuals first: polish); a distal segment held axial, or every segment axial (the
+tip-driven baseline) removes those unknowns. Global search is a seeded multi-start of
+insertion-order starts, fitted two at a time on two cores; the best plan whose every step
+is a stable converged equilibrium, and that runs least deep into a wall, wins. A seed
+reproduces a plan exactly, on any number of cores: budgets, not clocks, end every stage.
 """
 
+import contextlib
 from dataclasses import dataclass, field, replace
+from functools import partial
 import itertools
 import math
+import multiprocessing
+import signal
 
 import numpy as np
 from scipy.optimize import least_squares, minimize
@@ -34,6 +42,9 @@ STABILITY_WEIGHT = 0.1  # the penalty at zero margin: as much as a shape error o
 STAGE_GOOD = 1e-6       # a stage of the insertion-order start this close needs no more tries
 MARGIN_STEP = 1e-4      # forward-difference step of the margin's derivative (rad, mT)
 KEEP_OFF_WEIGHT = 10.0  # a link this far inside the margin costs 10 times the shape error
+NEIGHBOUR_WEIGHTS = (0.03, 0.3, 3.0)  # the neighbour-angle residuals' weights in turn (polish)
+GOOD_ENOUGH = 1e-6      # an objective this small (a shape error of 0.1% of L) ends a search
+ROUND_STARTS = 2        # random starts a round: fitted side by side on two cores
 
 
 @dataclass(frozen=True)
@@ -150,6 +161,7 @@ class Problem:
         self._radii = {s: np.array([model.spec.segments[i].radius_m
                                     for i in model.chain(s).segment_index])
                        for s in self.steps_m}
+        self.neighbour_weight = NEIGHBOUR_WEIGHTS[-1]
         self.evaluations = 0
 
     # -- unknowns ---------------------------------------------------------------------------
@@ -259,7 +271,43 @@ class Problem:
                     points_by[:, :n_dir] = d_direction
                 jac[target.size + 1:] = keep_off[1] @ points_by
             jacobians.append(jac)
+        neighbours, d_neighbours = self._neighbour_rows(x, directions)
+        rows.append(neighbours)
+        jacobians.append(d_neighbours)
         return np.concatenate(rows), np.vstack(jacobians) if jacobian else None
+
+    def _neighbour_pairs(self):
+        """Return the neighbouring magnetised segments (a, b) with a direction unknown."""
+        free = set(self.free_segments)  # pairs of held directions are no constraint
+        return [(a, b) for a, b in zip(self.magnetised, self.magnetised[1:])
+                if a + 1 == b and {a, b} & free]
+
+    def _neighbour_rows(self, x, directions):
+        """
+        Return (r, dr/dx): the neighbour-angle limit as residuals, ahead of its SLSQP polish.
+
+        One per pair: neighbour_weight (cos limit - d_a . d_b) where the pair is further
+        apart than the limit, else 0, so that least squares stays near the limit and SLSQP
+        (fit) has only a small step left to keep it exactly.
+        """
+        limit = self.constraints.max_neighbour_angle_rad
+        pairs = [] if limit is None else self._neighbour_pairs()
+        r, jac = np.zeros(len(pairs)), np.zeros((len(pairs), self.size))
+        column = {i: k * self.angles_per_segment for k, i in enumerate(self.free_segments)}
+        for row, (a, b) in enumerate(pairs):
+            excess = math.cos(limit) - directions[a] @ directions[b]
+            if excess <= 0:
+                continue
+            r[row] = self.neighbour_weight * excess
+            for this, other in ((a, b), (b, a)):
+                if this in column:
+                    k = column[this]
+                    elevation = 0.0 if self.angles_per_segment == 1 else x[k + 1]
+                    derivatives = _direction_derivatives(x[k], elevation)
+                    for j in range(self.angles_per_segment):
+                        jac[row, k + j] = -self.neighbour_weight * (directions[other]
+                                                                    @ derivatives[j])
+        return r, jac
 
     def _field_columns(self, d_field, scale):
         """Return d points / d this step's field unknowns from d points / d field (T)."""
@@ -407,9 +455,7 @@ class Problem:
                 rows = -2 * b[:, :, None] * to_world.reshape(steps, 3, -1)
                 return rows.sum(axis=1) / MILLITESLA ** 2
             out.append({'type': 'ineq', 'fun': total, 'jac': total_jac})
-        free = set(self.free_segments)  # pairs of held directions are no constraint
-        pairs = [(a, b) for a, b in zip(self.magnetised, self.magnetised[1:])
-                 if a + 1 == b and {a, b} & free]
+        pairs = self._neighbour_pairs()
         if c.max_neighbour_angle_rad is not None and pairs:
             cos_limit = math.cos(c.max_neighbour_angle_rad)
 
@@ -503,75 +549,208 @@ def _linear(matrix, limit):
 
 
 def optimise(problem, *, seed=0, starts=8, iterations=100, initial=None, progress=None,
-             first_stage=False):
+             first_stage=False, min_gain=None, workers=1):
     """
     Return the best Plan over a seeded multi-start, each start fitted by Gauss-Newton.
 
-    :param starts: random starts (directions uniform, fields within the limits)
+    A start is the insertion-order start (the rig's own order, its stages' tries drawn from
+    the start's own seed), or for other objectives (the torque balance) a random one. They
+    come in rounds of ROUND_STARTS, fitted side by side by ``workers`` processes; the
+    rounds, and so the plan, are the same for any number of workers.
+
+    :param starts: starts, at most (1 where only fields are unknown: the steps separate)
     :param iterations: model evaluations per start (and SLSQP iterations where limits other
         than per-axis bounds apply): the budget that ends each start
     :param initial: an x to try first (e.g. the tip-driven baseline or a previous plan)
-    :param progress: called with (start index, starts, best objective so far) after each
-        start, and with (steps fitted, steps, None) while the insertion-order start is built
+    :param progress: called with (starts done, starts at most, best objective so far) after
+        each, and with (steps fitted, steps, None) while this process builds an
+        insertion-order start
     :param first_stage: fit each start on the thesis' torque balance first (balance.py),
         then on the forward model
+    :param min_gain: end the search once a round lowers the best objective by less than
+        this fraction of it (the first round: its second start against its first), or once
+        it is under GOOD_ENOUGH (None: every start)
+    :param workers: processes fitting a round's starts side by side (forked from this one)
     """
     from tentacle_planner.balance import BalanceProblem  # it builds on this module
-    rng = np.random.default_rng(seed)
-    balance = BalanceProblem(problem) if first_stage else None
-    limit = problem.constraints.max_field_t or problem.constraints.max_total_field_t or 0.02
     n_dir = len(problem.free_segments) * problem.angles_per_segment
-    candidates = [] if initial is None else [np.asarray(initial, dtype=float)]
-    if starts and isinstance(problem, Problem):
-        try:
-            candidates.append(insertion_order_start(problem, rng, iterations,
-                                                    progress=progress))
-        except StartInterrupted as exc:
-            # Ctrl-C while the rig's own order is fitted (all of a fields-only search):
-            # the steps fitted so far, the rest holding the last field.
-            plan = problem.plan(np.clip(exc.x, *_limits(problem)))
-            return replace(plan, interrupted=True,
-                           flags=plan.flags + [f'interrupted: the best plan so far (the first '
-                                               f'{exc.fitted} of {len(problem.steps_m)} '
-                                               'steps fitted)'])
-        if not n_dir:
-            # Fields alone: each step's equilibrium depends on its own field and the state
-            # before it, so the steps separate and the insertion-order start, which fits
-            # them in turn as the rig runs them, is the search; random fields add nothing.
-            starts = 0
+    ordered = isinstance(problem, Problem)
+    if ordered and not n_dir:
+        # Fields alone: each step's equilibrium depends on its own field and the state
+        # before it, so the steps separate and the insertion-order start, which fits them
+        # in turn as the rig runs them, is the search: its stages draw nothing.
+        starts = min(starts, 1)
+    seeds = np.random.SeedSequence(seed)
+    fitter = _Fitter(problem, BalanceProblem(problem) if first_stage else None, iterations)
+    kind = 'ordered' if ordered else 'random'
+    # Each start's seed is spawned when its turn comes: a million take no memory.
+    jobs = itertools.chain([] if initial is None else [('fit', np.asarray(initial, float))],
+                           ((kind, seeds.spawn(1)[0]) for _ in range(starts)))
+    search = _Search(problem, (initial is not None) + starts, progress)
+    try:
+        with fitter.workers(workers if (initial is not None) + starts > 1 else 1):
+            reference = None
+            while True:
+                batch = list(itertools.islice(jobs, ROUND_STARTS))
+                if not batch:
+                    break
+                before = search.best_objective
+                pending = [fitter.submit(job) for job in batch[:-1]]
+                search.consider(fitter.run(batch[-1], progress))   # the last one: here
+                reference = search.best_objective if before is None else before
+                for result in pending:
+                    search.consider(result())
+                best = search.best_objective
+                if min_gain is not None and (best < GOOD_ENOUGH
+                                             or reference - best < min_gain * reference):
+                    break
+    except StartInterrupted as exc:
+        # Ctrl-C while this process built an insertion-order start (all of a fields-only
+        # search): the best plan so far, or the steps fitted, the rest holding the last field.
+        if search.best is not None:
+            return search.interrupted(fitter)
+        plan = problem.plan(np.clip(exc.x, *_limits(problem)))
+        return replace(plan, interrupted=True,
+                       flags=plan.flags + [f'interrupted: the best plan so far (the first '
+                                           f'{exc.fitted} of {len(problem.steps_m)} '
+                                           'steps fitted)'])
+    except KeyboardInterrupt:
+        # Ctrl-C keeps the best plan so far (or the start itself, if none is done).
+        if search.best is None and fitter.last_start is None:
+            raise
+        return search.interrupted(fitter)
+    return search.best
 
-    def random_start():
+
+class _Search:
+    """
+    The best plan so far.
+
+    One that relies on no unstable step and breaks no limit beats any that does, then one
+    that runs less deep into a wall, then the one of lower objective.
+    """
+
+    def __init__(self, problem, total, progress):
+        self.problem, self.total, self.progress = problem, total, progress
+        self.best, self.key, self.done = None, None, 0
+
+    @property
+    def best_objective(self):
+        """Return the best plan's objective (None before any)."""
+        return None if self.best is None else self.best.objective
+
+    def consider(self, x):
+        """Take a fitted x as a candidate."""
+        plan = self.problem.plan(x)
+        key = (len(plan.flags), self.problem.deepest_contact_m(plan), plan.objective)
+        if self.key is None or key < self.key:
+            self.best, self.key = plan, key
+        self.done += 1
+        if self.progress is not None:
+            self.progress(self.done, self.total, self.best.objective)
+
+    def interrupted(self, fitter):
+        """Return the best plan so far (or the last start, clipped), marked interrupted."""
+        fallback = self.best or self.problem.plan(np.clip(fitter.last_start,
+                                                          *_limits(self.problem)))
+        return replace(fallback, interrupted=True,
+                       flags=fallback.flags + ['interrupted: the best plan so far'])
+
+
+_WORKER_FITTER = None   # the _Fitter whose starts forked workers fit (set before the fork)
+
+
+def _fit_in_worker(job):
+    """Return (x, model evaluations spent): a start job run in a worker."""
+    before = _WORKER_FITTER.problem.evaluations
+    return _WORKER_FITTER.run(job), _WORKER_FITTER.problem.evaluations - before
+
+
+def _quiet_worker():
+    signal.signal(signal.SIGINT, signal.SIG_IGN)   # Ctrl-C is the parent's to handle
+
+
+class _Fitter:
+    """Makes and fits starts: here, or side by side in forked workers (the same answers)."""
+
+    def __init__(self, problem, balance, iterations):
+        self.problem, self.balance, self.iterations = problem, balance, iterations
+        self.pool, self.last_start = None, None
+
+    def run(self, job, progress=None):
+        """Return a job's fitted x: ('fit', x0), ('ordered', seed) or ('random', seed)."""
+        kind, value = job
+        return self.fit(value) if kind == 'fit' else getattr(self, kind)(value, progress)
+
+    def fit(self, x0):
+        """Return start x0 fitted (on the torque balance first, with a first stage)."""
+        self.last_start = x0
+        if self.balance is not None:
+            x0 = fit(self.balance, x0, self.iterations)
+        return polish(self.problem, x0, self.iterations)
+
+    def ordered(self, seed, progress=None):
+        """Return an insertion-order start, its stages' tries drawn from seed, fitted."""
+        return self.fit(insertion_order_start(self.problem, np.random.default_rng(seed),
+                                              self.iterations, progress=progress))
+
+    def random(self, seed, progress=None):
+        """Return a random start (directions uniform, fields within the limits), fitted."""
+        problem, rng = self.problem, np.random.default_rng(seed)
+        n_dir = len(problem.free_segments) * problem.angles_per_segment
+        limit = problem.constraints.max_field_t or problem.constraints.max_total_field_t or \
+            0.02
         directions = rng.uniform(-math.pi, math.pi, n_dir)
         if problem.angles_per_segment == 2:
             directions[1::2] *= 0.25  # elevations within +-45 deg
         fields = rng.uniform(-0.5, 0.5, problem.size - n_dir) * limit / MILLITESLA
-        return np.concatenate([directions, fields])
+        return self.fit(np.concatenate([directions, fields]))
 
-    # Each random start is drawn when its turn comes (in the same order, so the same seed
-    # gives the same plan): a million starts take no memory before the first is fitted.
-    total = len(candidates) + starts
-    candidates = itertools.chain(candidates, (random_start() for _ in range(starts)))
-    best, best_key, x0 = None, None, None
-    try:  # all of the loop: Ctrl-C may land between two fits too
-        for index, x0 in enumerate(candidates):
-            if balance is not None:
-                x0 = fit(balance, x0, iterations)
-            plan = problem.plan(fit(problem, x0, iterations))
-            # A plan that relies on no unstable step and breaks no limit beats any that does,
-            # then one that runs less deep into a wall (none: 0).
-            key = (len(plan.flags), problem.deepest_contact_m(plan), plan.objective)
-            if best_key is None or key < best_key:
-                best, best_key = plan, key
-            if progress is not None:
-                progress(index + 1, total, best.objective)
-    except KeyboardInterrupt:
-        # Ctrl-C keeps the best plan so far (or the start itself, if none is done).
-        if best is None and x0 is None:
-            raise
-        fallback = best or problem.plan(np.clip(x0, *_limits(problem)))
-        return replace(fallback, interrupted=True,
-                       flags=fallback.flags + ['interrupted: the best plan so far'])
-    return best
+    @contextlib.contextmanager
+    def workers(self, count):
+        """Run submitted starts in count - 1 forked processes while inside (1: here)."""
+        global _WORKER_FITTER
+        if count > 1:
+            _WORKER_FITTER = self
+            self.pool = multiprocessing.get_context('fork').Pool(count - 1, _quiet_worker)
+        try:
+            yield self
+        finally:
+            if self.pool is not None:
+                self.pool.terminate()
+                self.pool.join()
+            self.pool, _WORKER_FITTER = None, None
+
+    def submit(self, job):
+        """Return a callable that returns job's fitted x (from a worker, or run when called)."""
+        if self.pool is None:
+            return partial(self.run, job)
+        handle = self.pool.apply_async(_fit_in_worker, (job,))
+
+        def result():
+            x, evaluations = handle.get()
+            self.problem.evaluations += evaluations
+            return x
+        return result
+
+
+def polish(problem, x0, iterations):
+    """
+    Return x fitted from x0 with every limit kept, the neighbour-angle limit approached.
+
+    Where a neighbour-angle limit binds, least squares first weighs it as residuals of
+    growing weight (NEIGHBOUR_WEIGHTS), so the start moves to within the limit along a path
+    of good shapes; SLSQP then keeps it exactly. Straight from a start far past the limit,
+    SLSQP often ended in a poor plan (pancreatic_duct: 0.8% of L became 13%).
+    """
+    if problem.constraints.max_neighbour_angle_rad is not None and problem.free_segments:
+        for weight in NEIGHBOUR_WEIGHTS[:-1]:
+            problem.neighbour_weight = weight
+            try:
+                x0 = fit(problem, x0, iterations, limits=False)
+            finally:
+                problem.neighbour_weight = NEIGHBOUR_WEIGHTS[-1]
+    return fit(problem, x0, iterations)
 
 
 class StartInterrupted(KeyboardInterrupt):
@@ -618,8 +797,10 @@ def insertion_order_start(problem, rng, iterations=100, tries=4, progress=None):
 def _fit_in_insertion_order(problem, rng, iterations, tries, directions, fields, progress):
     """Fit insertion_order_start's stages: append each step's field, update directions."""
     model, c = problem.model, problem.constraints
-    # Stages keep the per-axis field bounds only: the whole problem's fit, which polishes
-    # the start, applies every other limit (a stage's SLSQP took most of the time).
+    # Stages keep the per-axis field bounds, and the neighbour-angle limit as residuals
+    # only: the whole problem's fit, which polishes the start, keeps every limit exactly (a
+    # stage's SLSQP took most of the time; a start that ignored the neighbour angle was
+    # polished from up to 174 deg apart, often into a poor plan).
     bounds_only = replace(c, max_total_field_t=None, max_field_change_t=None,
                           max_neighbour_angle_rad=None)
     seen, start = set(), None
@@ -640,7 +821,7 @@ def _fit_in_insertion_order(problem, rng, iterations, tries, directions, fields,
                 guess[i] = _direction(rng.uniform(-math.pi, math.pi),
                                       0.0 if stage.angles_per_segment == 1 else
                                       rng.uniform(-0.5, 0.5))
-            x = fit(stage, stage.pack(guess, [field_t]), iterations // 2)
+            x = fit(stage, stage.pack(guess, [field_t]), iterations // 2, limits=False)
             value = stage.objective(x)[0]
             if best is None or value < best[0]:
                 best = (value, stage, x)
@@ -657,7 +838,7 @@ def _fit_in_insertion_order(problem, rng, iterations, tries, directions, fields,
             progress(len(fields), len(problem.steps_m), None)
 
 
-def fit(problem, x0, iterations=100):
+def fit(problem, x0, iterations=100, limits=True):
     """
     Return x after Gauss-Newton from x0, then SLSQP for the limits that are not bounds.
 
@@ -666,6 +847,7 @@ def fit(problem, x0, iterations=100):
     field-change or neighbour-angle limits apply.
 
     :param iterations: model evaluations (Gauss-Newton) and SLSQP iterations: the budget
+    :param limits: keep the limits that are not bounds (False: as residuals alone)
     """
     box = problem.bounds()
     lower, upper = _limits(problem)
@@ -683,7 +865,7 @@ def fit(problem, x0, iterations=100):
     x = least_squares(fun, np.clip(x0, lower, upper), jac=jac, bounds=(lower, upper),
                       method='trf', max_nfev=iterations, xtol=1e-12, ftol=1e-14,
                       gtol=1e-12).x
-    constraints = problem.inequalities()
+    constraints = problem.inequalities() if limits else []
     # A least-squares minimum that keeps every limit is the constrained one as well.
     if constraints and min(np.min(c['fun'](x)) for c in constraints) < 0:
         x = minimize(problem.objective, x, jac=True, method='SLSQP', bounds=box,

@@ -64,7 +64,7 @@ def build_parser():
     parser.add_argument('--seed', type=_whole(0), default=0,
                         help='seeds the multi-start: a whole number >= 0')
     parser.add_argument('--starts', type=_whole(1, MAX_STARTS), default=8,
-                        help=f'random starts, 1 to {MAX_STARTS} (default 8)')
+                        help=f'starts of the multi-start, 1 to {MAX_STARTS} (default 8)')
     parser.add_argument('--iterations', type=_whole(1, MAX_ITERATIONS), default=100,
                         help=f'model evaluations per start, 1 to {MAX_ITERATIONS} (default 100)')
     parser.add_argument('--baseline', choices=('tip-driven',), default=None,

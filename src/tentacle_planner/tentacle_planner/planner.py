@@ -10,6 +10,7 @@ interaction is planned without and verified with).
 
 from dataclasses import dataclass, field
 import math
+import os
 
 import numpy as np
 from tentacle_model import statics
@@ -21,6 +22,12 @@ from tentacle_planner.playback import playback
 from tentacle_planner.robustness import perturbed_problems, report, RobustProblem
 
 HIGHER_FIDELITY_SUBLINKS = 4  # sub-links per planning link in the re-check
+WORKERS = 2                   # processes fitting starts side by side, at most
+
+
+def default_workers():
+    """Return WORKERS, or the number of cores this process may use if fewer."""
+    return max(1, min(WORKERS, len(os.sched_getaffinity(0))))
 
 
 @dataclass(frozen=True)
@@ -157,14 +164,18 @@ def recheck(scene, plan):
     return rows, flags
 
 
-def plan_scene(scene, *, seed=0, starts=8, iterations=100, tip_driven=False, robust=False,
-               progress=None, first_stage=False):
+def plan_scene(scene, *, seed=0, starts=8, iterations=100, min_gain=None, tip_driven=False,
+               robust=False, progress=None, first_stage=False, workers=None):
     """
     Return the SceneResult of a scene.
 
     :param seed: seeds the multi-start: the same seed gives the same plan
-    :param starts: random starts of the multi-start
+    :param starts: random starts of the multi-start, at most
     :param iterations: model evaluations per start (the budget)
+    :param min_gain: end the multi-start once a round of random starts gains less than this
+        fraction of the objective (None: every start)
+    :param workers: processes fitting starts side by side (default: WORKERS, or the cores
+        this process may use, if fewer); the plan is the same for any number
     :param tip_driven: the baseline: every magnetisation axial, fields only
     :param robust: plan against the worst of the perturbed models, not the nominal one
     :param progress: called with (stage, done, total, best objective)
@@ -182,8 +193,10 @@ def plan_scene(scene, *, seed=0, starts=8, iterations=100, tip_driven=False, rob
         return None if progress is None else (
             lambda done, total, best: progress(stage, done, total, best))
 
+    workers = default_workers() if workers is None else workers
     nominal = optimise(problem, seed=seed, starts=starts, iterations=iterations,
-                       progress=report_progress('plan'), first_stage=first_stage)
+                       progress=report_progress('plan'), first_stage=first_stage,
+                       min_gain=min_gain, workers=workers)
     try:
         return _after_search(scene, problem, nominal, seed, iterations, robust,
                              report_progress)

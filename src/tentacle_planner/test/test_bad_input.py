@@ -377,7 +377,7 @@ def test_a_real_sigint_writes_the_best_plan_so_far(tmp_path):
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=dict(os.environ))
     progress, deadline = b'', time.monotonic() + 120.0
     try:
-        while b' 1/201 starts' not in progress and b' 2/201 starts' not in progress:
+        while b' 1/200 starts' not in progress and b' 2/200 starts' not in progress:
             assert time.monotonic() < deadline and child.poll() is None, progress
             progress += os.read(child.stderr.fileno(), 4096)
         child.send_signal(signal.SIGINT)

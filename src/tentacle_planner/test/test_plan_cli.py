@@ -64,6 +64,39 @@ def test_a_scene_is_planned_written_and_verified(tmp_path, capsys):
     assert 'shape RMS' in printed.out and 'no flags' in printed.out
 
 
+def channel_walls(radius_m, half_width_m):
+    """Return the scene's walls: either side of arc_scene's arc, 0.25 mm apart, in its plane."""
+    s = np.arange(0.0, 0.06, 2.5e-4)
+    return {'walls': [{'points_m': np.column_stack([
+        (radius_m - side) * np.sin(s / radius_m),
+        radius_m - (radius_m - side) * np.cos(s / radius_m), 0 * s]).round(9).tolist()}
+        for side in (half_width_m, -half_width_m)]}
+
+
+def test_a_channel_narrower_than_the_body_is_flagged_with_the_least_penetration(
+        tmp_path, capsys):
+    # A 2 mm body in a straight 1.8 mm channel: no plan keeps off; the least it can go into
+    # a wall, straight and centred, is 0.1 mm (to the walls' points 0.25 mm apart, at least
+    # 0.0914 mm).
+    straight = 1e3   # m: the arc's radius
+    scene_file = arc_scene(tmp_path, radius_m=straight,
+                           obstacles=channel_walls(straight, 0.0009))
+    code = plan_cli.main(['--scene', str(scene_file), '--out', str(tmp_path / 'out'),
+                          '--starts', '2'])
+    printed = capsys.readouterr()
+    assert code == 3, printed.out + printed.err
+    flags = yaml.safe_load((tmp_path / 'out' / 'schedule.yaml').read_text())['flags']
+    least = [f for f in flags if f.startswith('no plan found keeps the body off')]
+    assert len(least) == 1 and least == flags[:1], flags
+    depth_mm = float(least[0].split('least penetration found is ')[1].split(' mm')[0])
+    assert 0.09 <= depth_mm <= 0.11
+    assert any(f.startswith('the body touches wall') for f in flags[1:])
+    # A channel on the arc, 2.6 mm wide (the papilla's): the plan keeps off, unflagged.
+    wide = arc_scene(tmp_path, obstacles=channel_walls(0.06, 0.0013))
+    assert plan_cli.main(['--scene', str(wide), '--out', str(tmp_path / 'wide'),
+                          '--starts', '2']) == 0, capsys.readouterr().err
+
+
 def test_the_same_seed_writes_the_same_schedule(tmp_path):
     scene = load_scene(arc_scene(tmp_path))
     first = schedule_document(plan_scene(scene, seed=4, starts=2))

@@ -691,8 +691,15 @@ class _Fitter:
 
     def ordered(self, seed, progress=None):
         """Return an insertion-order start, its stages' tries drawn from seed, fitted."""
-        return self.fit(insertion_order_start(self.problem, np.random.default_rng(seed),
-                                              self.iterations, progress=progress))
+        x0 = insertion_order_start(self.problem, np.random.default_rng(seed),
+                                   self.iterations, progress=progress)
+        if not self.problem.free_segments:
+            # Fields alone: the stages fitted every step from the state before it, as the
+            # whole fit would (a step's equilibrium depends on its own field and that
+            # state); only the limits that are not bounds are left to keep.
+            self.last_start = x0
+            return fit(self.problem, x0, self.iterations, gauss_newton=False)
+        return self.fit(x0)
 
     def random(self, seed, progress=None):
         """Return a random start (directions uniform, fields within the limits), fitted."""
@@ -797,10 +804,9 @@ def insertion_order_start(problem, rng, iterations=100, tries=4, progress=None):
 def _fit_in_insertion_order(problem, rng, iterations, tries, directions, fields, progress):
     """Fit insertion_order_start's stages: append each step's field, update directions."""
     model, c = problem.model, problem.constraints
-    # Stages keep the per-axis field bounds, and the neighbour-angle limit as residuals
-    # only: the whole problem's fit, which polishes the start, keeps every limit exactly (a
-    # stage's SLSQP took most of the time; a start that ignored the neighbour angle was
-    # polished from up to 174 deg apart, often into a poor plan).
+    # Stages keep the per-axis field bounds only: the whole problem's fit (polish) keeps
+    # every other limit (a stage's SLSQP took most of the time). Stages that weighed the
+    # neighbour angle or the walls too made worse starts: greedy choices, dead ends later.
     bounds_only = replace(c, max_total_field_t=None, max_field_change_t=None,
                           max_neighbour_angle_rad=None)
     seen, start = set(), None
@@ -821,7 +827,10 @@ def _fit_in_insertion_order(problem, rng, iterations, tries, directions, fields,
                 guess[i] = _direction(rng.uniform(-math.pi, math.pi),
                                       0.0 if stage.angles_per_segment == 1 else
                                       rng.uniform(-0.5, 0.5))
-            x = fit(stage, stage.pack(guess, [field_t]), iterations // 2, limits=False)
+            # Half the budget where the whole fit polishes the start; all of it where the
+            # stages are the whole fit (fields alone).
+            x = fit(stage, stage.pack(guess, [field_t]),
+                    iterations // 2 if problem.free_segments else iterations, limits=False)
             value = stage.objective(x)[0]
             if best is None or value < best[0]:
                 best = (value, stage, x)
@@ -838,7 +847,7 @@ def _fit_in_insertion_order(problem, rng, iterations, tries, directions, fields,
             progress(len(fields), len(problem.steps_m), None)
 
 
-def fit(problem, x0, iterations=100, limits=True):
+def fit(problem, x0, iterations=100, limits=True, gauss_newton=True):
     """
     Return x after Gauss-Newton from x0, then SLSQP for the limits that are not bounds.
 
@@ -848,6 +857,7 @@ def fit(problem, x0, iterations=100, limits=True):
 
     :param iterations: model evaluations (Gauss-Newton) and SLSQP iterations: the budget
     :param limits: keep the limits that are not bounds (False: as residuals alone)
+    :param gauss_newton: False: x0 is fitted already, keep the limits only
     """
     box = problem.bounds()
     lower, upper = _limits(problem)
@@ -862,9 +872,10 @@ def fit(problem, x0, iterations=100, limits=True):
             fun(x)
         return cache['value'][1]
 
-    x = least_squares(fun, np.clip(x0, lower, upper), jac=jac, bounds=(lower, upper),
-                      method='trf', max_nfev=iterations, xtol=1e-12, ftol=1e-14,
-                      gtol=1e-12).x
+    x = np.clip(x0, lower, upper)
+    if gauss_newton:
+        x = least_squares(fun, x, jac=jac, bounds=(lower, upper), method='trf',
+                          max_nfev=iterations, xtol=1e-12, ftol=1e-14, gtol=1e-12).x
     constraints = problem.inequalities() if limits else []
     # A least-squares minimum that keeps every limit is the constrained one as well.
     if constraints and min(np.min(c['fun'](x)) for c in constraints) < 0:

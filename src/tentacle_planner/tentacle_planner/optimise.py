@@ -82,6 +82,7 @@ class Step:
     stability: float               # smallest 3-DoF Hessian eigenvalue, N m/rad^2 (> 0: stable)
     converged: bool
     backbone_m: float = 0.0        # how far the backbone reached past the base, m
+    link_radii_m: np.ndarray | None = None   # (n,) each link's section radius, m
 
 
 @dataclass(frozen=True)
@@ -162,6 +163,9 @@ class Problem:
                                     for i in model.chain(s).segment_index])
                        for s in self.steps_m}
         self.neighbour_weight = NEIGHBOUR_WEIGHTS[-1]
+        # (lower (3,), upper (3,)) each axis of every step's field, T, within the limits: what
+        # the rig can reach from the step before (dense playback); 3-axis fields only
+        self.field_box_t = None
         self.evaluations = 0
 
     # -- unknowns ---------------------------------------------------------------------------
@@ -428,7 +432,13 @@ class Problem:
         limit = self.constraints.max_field_t
         field_bound = (None, None) if limit is None or not self._axes_are_unknowns else (
             -limit / MILLITESLA, limit / MILLITESLA)
-        return [(None, None)] * n_dir + [field_bound] * (len(self.steps_m) * self.field_size)
+        fields = [field_bound] * (len(self.steps_m) * self.field_size)
+        if self.field_box_t is not None and self.field_size == 3:
+            low, high = (np.asarray(v, float) / MILLITESLA for v in self.field_box_t)
+            if field_bound[0] is not None:
+                low, high = np.maximum(low, field_bound[0]), np.minimum(high, field_bound[1])
+            fields = [(float(a), float(b)) for a, b in zip(low, high)] * len(self.steps_m)
+        return [(None, None)] * n_dir + fields
 
     def inequalities(self):
         """Return SLSQP inequality constraints (fun(x) >= 0) with their Jacobians."""
@@ -489,7 +499,8 @@ class Problem:
                 else self.model.stability(solution, field_t)
             steps.append(Step(solution.inserted_m, field_t, solution.points_m,
                               float(np.sqrt(np.mean(distances ** 2))), float(distances[-1]),
-                              stability, eq.converged, self.backbones_m[k]))
+                              stability, eq.converged, self.backbones_m[k],
+                              self._radii[solution.inserted_m]))
             if not eq.converged:
                 flags.append(f'step {k + 1} did not converge: {eq.reason}')
             elif not stability > 0:

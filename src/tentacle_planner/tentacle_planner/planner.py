@@ -8,7 +8,7 @@ re-check in the scene's own model where planning left a term out (magnet-to-magn
 interaction is planned without and verified with).
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import math
 import os
 
@@ -17,11 +17,12 @@ from tentacle_model import statics
 from tentacle_model.chain import discretise
 from tentacle_planner import paths
 from tentacle_planner.clearance import clearance
-from tentacle_planner.optimise import Constraints, KeepOff, optimise, Plan, Problem
+from tentacle_planner.optimise import Constraints, KeepOff, optimise, Plan, polish, Problem
 from tentacle_planner.playback import playback
 from tentacle_planner.robustness import perturbed_problems, report, RobustProblem
 
 HIGHER_FIDELITY_SUBLINKS = 4  # sub-links per planning link in the re-check
+REFINE_TOLERANCE = 0.1        # the re-check may be this much (of the error) worse: confirmed
 WORKERS = 2                   # processes fitting starts side by side, at most
 
 
@@ -44,6 +45,7 @@ class SceneResult:
     verification: list              # [(what, RMS)]: the plan re-checked in fuller models
     flags: list = field(default_factory=list)
     interrupted: bool = False
+    planning_model: object = None   # the ModelSettings the plan was made in (None: the scene's)
 
 
 def constraints_of(scene, tip_driven=False):
@@ -94,8 +96,10 @@ def shape_rms(scene, steps):
 
 def step_clearance(scene, step):
     """Return (gap, what): how far a Step's body keeps off the scene's obstacles, m."""
-    chain = discretise(scene.tentacle, step.inserted_m, scene.model.sublinks)
-    radii = [scene.tentacle.segments[i].radius_m for i in chain.segment_index]
+    radii = step.link_radii_m
+    if radii is None:   # a step of the scene's own model
+        chain = discretise(scene.tentacle, step.inserted_m, scene.model.sublinks)
+        radii = [scene.tentacle.segments[i].radius_m for i in chain.segment_index]
     return clearance(step.points_m, radii, scene.obstacles, scene.walls)
 
 
@@ -120,6 +124,63 @@ def least_contact_flag(scene, steps):
             f'found is {-gap * 1e3:.2f} mm, into {what} at {inserted_m * 1e3:.1f} mm inserted']
 
 
+def higher_fidelity_sublinks(scene):
+    """
+    Return the re-check's sub-links per segment (None: no more than the scene's fit).
+
+    The most, up to HIGHER_FIDELITY_SUBLINKS times the scene's, that the solver's size
+    limits allow with 3-DoF joints and the magnets' interaction.
+    """
+    for sublinks in range(scene.model.sublinks * HIGHER_FIDELITY_SUBLINKS,
+                          scene.model.sublinks, -1):
+        chain = discretise(scene.tentacle, scene.insertion_steps_m[-1], sublinks)
+        try:
+            statics.check_size(chain.size, 3, chain.interacting_pair_count())
+        except statics.ProblemTooLarge:
+            continue
+        return sublinks
+    return None
+
+
+def finer_problem(scene, problem, sublinks):
+    """Return the Problem of a scene's key steps in its planning model with more sub-links."""
+    model = scene.tentacle_model(sublinks=sublinks, dipoles=problem.model.dipoles)
+    steps, backbones, targets = key_steps(scene, model)
+    return Problem(model, steps, targets, problem.constraints, problem.fixed_directions,
+                   backbones_m=backbones, keep_off=problem.keep_off)
+
+
+def refine(scene, problem, plan, iterations):
+    """
+    Return (problem, plan, re-check): the plan polished in a finer model where needed.
+
+    The re-check is recheck(scene, plan) of the plan returned, or None where it is to be
+    made (after a polish).
+
+    The planning model is confirmed when the plan re-checked at higher fidelity is no worse
+    than in the planning model by more than REFINE_TOLERANCE of its error (and 0.1% of L);
+    otherwise the plan is polished in the planning model with the re-check's sub-links and
+    kept if it fits that model better. The plan, its dense playback and its robustness are
+    then the finer model's.
+    """
+    sublinks = higher_fidelity_sublinks(scene)
+    if sublinks is None:
+        return problem, plan, None
+    planned = shape_rms(scene, plan.steps)
+    checked = recheck(scene, plan)
+    rechecked = checked[0][-1][1]
+    if rechecked - planned <= max(REFINE_TOLERANCE * planned, 1e-3 * scene.tentacle.length_m):
+        return problem, plan, checked
+    fine = finer_problem(scene, problem, sublinks)
+    x0 = fine.pack(plan.directions, plan.fields_t)
+    x = polish(fine, x0, iterations)
+
+    def objective(x):
+        r = fine.residuals(x, jacobian=False)[0]
+        return float(r @ r)
+    return fine, fine.plan(x if objective(x) < objective(x0) else x0), None
+
+
 def fuller_models(scene):
     """
     Return [(what, model options)]: the models a plan is re-checked in.
@@ -132,17 +193,11 @@ def fuller_models(scene):
     planned_without = scene.model.dipoles and not scene.magnetisation.given
     out = [('the scene model with magnet-to-magnet interaction', {})] if planned_without \
         else []
-    for sublinks in range(scene.model.sublinks * HIGHER_FIDELITY_SUBLINKS,
-                          scene.model.sublinks, -1):
-        chain = discretise(scene.tentacle, scene.insertion_steps_m[-1], sublinks)
-        try:
-            statics.check_size(chain.size, 3, chain.interacting_pair_count())
-        except statics.ProblemTooLarge:
-            continue
+    sublinks = higher_fidelity_sublinks(scene)
+    if sublinks is not None:
         out.append((f'higher fidelity: {sublinks} sub-links per segment, 3-DoF joints, '
                     'magnet-to-magnet interaction', {'sublinks': sublinks, 'dof': 3,
                                                      'dipoles': True}))
-        break
     return out
 
 
@@ -225,6 +280,8 @@ def _after_search(scene, problem, nominal, seed, iterations, robust, report_prog
         skipped.append(what)
         return otherwise
 
+    problem, nominal, checked = phase('the polish in the finer model', lambda: refine(
+        scene, problem, nominal, iterations), (problem, nominal, None))
     problems = phase('the robustness report', lambda: perturbed_problems(problem), [])
     robust_plan, robust_rows = None, []
     if robust:
@@ -255,13 +312,15 @@ def _after_search(scene, problem, nominal, seed, iterations, robust, report_prog
         flags += dense_flags
     flags = least_contact_flag(scene, list(plan.steps) + dense) + flags
     robustness = phase('the robustness report', lambda: report(problems, nominal, error), [])
-    verification, recheck_flags = phase('the re-check in fuller models',
-                                        lambda: recheck(scene, plan), ([], []))
+    verification, recheck_flags = phase(
+        'the re-check in fuller models', lambda: checked if checked is not None and (
+            plan is nominal) else recheck(scene, plan), ([], []))
     flags += recheck_flags
     if skipped:
         flags.append('interrupted: left out ' + ', '.join(dict.fromkeys(skipped)))
     return SceneResult(scene, plan, nominal, robust_plan, dense, robustness,
-                       robust_rows, verification, flags, interrupted)
+                       robust_rows, verification, flags, interrupted,
+                       replace(scene.model, sublinks=problem.model.sublinks))
 
 
 def magnetisation_angles_deg(directions):

@@ -31,8 +31,9 @@ def playback(model, plan, target, step_m, constraints, iterations=50, progress=N
     :param target: callable (chain, inserted_m) -> (n + 1, 3) follow-the-leader target, m
     :param step_m: insertion between dense steps, m
     :param constraints: Constraints (field limits apply at every dense step; where the best
-        field would change by more than max_field_change_t from the dense step before, it is
-        held to that change, and flagged: the rig refuses the larger change)
+        field would change by more than max_field_change_t from the dense step before, the
+        rig refuses it: a 3-axis field is fitted again within that change, a planar one
+        held to it and flagged)
     :param iterations: Gauss-Newton budget per dense step
     :param progress: called with (steps done, steps, None) after every dense step
     :param keep_off: a KeepOff every dense step's field keeps the body off by (None: none)
@@ -51,7 +52,15 @@ def playback(model, plan, target, step_m, constraints, iterations=50, progress=N
         if change is not None and steps:   # the rig refuses a larger change: keep within
             previous, field = steps[-1].field_t, problem.unpack(x)[1][0]
             held = np.clip(field, previous - change, previous + change)
-            if np.any(held != field):
+            if np.any(held != field) and problem.field_size == 3:
+                # The best field the rig can reach from the step before: a fit within the
+                # limits, as every field is (its contact, stability and convergence are
+                # checked as any step's).
+                problem.field_box_t = (previous - change, previous + change)
+                x = fit(problem, problem.pack(plan.directions, [held]), iterations)
+                held = np.clip(problem.unpack(x)[1][0], previous - change, previous + change)
+                x = problem.pack(plan.directions, [held])
+            elif np.any(held != field):   # a planar field: clipped, and said so
                 x = problem.pack(plan.directions, [held])
                 flags.append(f'field change held to the limit into the dense step at '
                              f'{inserted_m * 1e3:.1f} mm')

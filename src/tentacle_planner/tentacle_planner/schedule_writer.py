@@ -61,6 +61,7 @@ def planned_tentacle(result):
 def schedule_document(result):
     """Return the schedule as a plain document (the YAML's content)."""
     scene, plan = result.scene, result.plan
+    model = result.planning_model or scene.model
     key = {round(s.inserted_m, 12) for s in plan.steps}
     played = result.playback_steps or plan.steps
     steps = []
@@ -87,9 +88,9 @@ def schedule_document(result):
         'format': FORMAT,
         'scene': {'name': scene.name, 'sha256': scene.sha256},
         'tentacle': planned_tentacle(result),
-        'model': {'dof': scene.model.dof, 'sublinks': scene.model.sublinks,
-                  'gravity_m_s2': [float(g) for g in scene.model.gravity_m_s2],
-                  'dipoles': scene.model.dipoles},
+        'model': {'dof': model.dof, 'sublinks': model.sublinks,
+                  'gravity_m_s2': [float(g) for g in model.gravity_m_s2],
+                  'dipoles': model.dipoles},
         'magnetisation_deg': [{'segment': i + 1, 'azimuth_deg': round(float(angles[i, 0]), 3),
                                'elevation_deg': round(float(angles[i, 1]), 3)}
                               for i in magnetised],

@@ -289,7 +289,11 @@ PHASES = [
      'the re-check in fuller models'),
     ('the robustness report', planner, 'report', 0, {}, [], True,
      'interrupted: left out the robustness report, the re-check in fuller models'),
-    ('the re-check', planner, 'recheck', 0, {}, [], True,
+    ('the polish in the finer model (its re-check first)', planner, 'recheck', 0, {}, [],
+     True, 'interrupted: left out the polish in the finer model, the robustness report, '
+     'the re-check in fuller models'),
+    # (the polish's re-check serves a plan it leaves as it was: a robust plan is checked anew)
+    ('the re-check', planner, 'recheck', 1, {}, ['--robust'], True,
      'interrupted: left out the re-check in fuller models'),
     ('writing the schedule', schedule, 'schedule_document', 0, {}, [], False, None),
 ]

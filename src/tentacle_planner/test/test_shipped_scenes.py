@@ -2,8 +2,9 @@
 The shipped scenes plan as the README reports, and so do scenes nobody tuned for.
 
 Issue 8 section 6: every shipped scene within 5% of the tentacle length (full-shape RMS,
-DESIGN.md's definition) in the planning model, re-checked in a higher-fidelity one; scene A
-at least 48% below the tip-driven baseline (thesis Table 3.1).
+DESIGN.md's definition) in the planning model, re-checked in a higher-fidelity one. Issue 18:
+judged in the re-check, scene A at least 48% below the tip-driven baseline (thesis Table
+3.1) and scenes B, C and D no worse than it.
 """
 
 import math
@@ -18,10 +19,20 @@ ROOT = pathlib.Path(__file__).resolve().parents[3]
 SCENES = sorted((ROOT / 'config' / 'scenes').glob('*.yaml'))
 
 
+PLANNED = {}   # scene name -> (scene, SceneResult): each shipped scene planned once
+
+
+def planned_scene(name):
+    """Return (scene, SceneResult) of a shipped scene, planned with the defaults."""
+    if name not in PLANNED:
+        scene = load_scene(ROOT / 'config' / 'scenes' / f'{name}.yaml')
+        PLANNED[name] = scene, plan_scene(scene)
+    return PLANNED[name]
+
+
 @pytest.fixture(scope='module', params=[p.stem for p in SCENES])
 def planned(request):
-    scene = load_scene(ROOT / 'config' / 'scenes' / f'{request.param}.yaml')
-    return scene, plan_scene(scene)
+    return planned_scene(request.param)
 
 
 def test_every_shipped_scene_plans_within_5_percent(planned):
@@ -34,13 +45,21 @@ def test_every_shipped_scene_plans_within_5_percent(planned):
     assert all(rms <= 0.05 * length for rms in rechecked.values())
 
 
-def test_scene_a_is_48_percent_below_the_tip_driven_baseline():
-    scene = load_scene(ROOT / 'config' / 'scenes' / 'ch3_a.yaml')
-    shaped = shape_rms(scene, plan_scene(scene).plan.steps)
+def higher_fidelity(result):
+    """Return a SceneResult's shape RMS re-checked in the higher-fidelity model, m."""
+    return next(rms for what, rms in result.verification if what.startswith('higher fidelity'))
+
+
+@pytest.mark.parametrize('name', ['ch3_a', 'ch3_b', 'ch3_c', 'ch3_d'])
+def test_chapter_3_plans_beat_the_tip_driven_baseline_as_the_rig_would_show(name):
+    # Issue 18: judged in the higher-fidelity re-check, not the planning model: at most the
+    # baseline's error on B, C and D, at least 48% below it on A (thesis Table 3.1).
+    scene, shaped = planned_scene(name)
     tip_driven = plan_scene(scene, tip_driven=True)
     assert np.allclose([np.linalg.norm(d) for d in tip_driven.plan.directions], 1.0)
     assert np.allclose(tip_driven.plan.directions[:, 1:], 0.0)   # every segment axial
-    assert shaped <= (1 - 0.48) * shape_rms(scene, tip_driven.plan.steps)
+    below = 0.48 if name == 'ch3_a' else 0.0
+    assert higher_fidelity(shaped) <= (1 - below) * higher_fidelity(tip_driven)
 
 
 def untuned_scene(seed):

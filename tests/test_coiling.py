@@ -2,7 +2,7 @@
 Thesis chapter 6's coiling mode on the simulated rig, over DDS: coiled with feedback, released.
 
 The first six backbone steps of config/scenes/ch6_coiling.yaml (the strip coiled to about
-100 deg), played by player_node in ``coiling`` mode with the feedback ending at 50 deg (the
+100 deg), played by player_node in ``coiling`` mode with the feedback ending at 60 deg (the
 thesis: 220 deg of 360; here scaled to the short coil), so that the first steps are corrected
 on the tracked tip angle and the last are open loop; then released by a retraction. Judged
 on the simulator's truth in the rig's own recording, and on the emulators at the end.
@@ -25,7 +25,7 @@ import yaml
 
 pytestmark = pytest.mark.ros
 
-FEEDBACK_MAX_DEG = 50.0
+FEEDBACK_MAX_DEG = 60.0
 MISMATCH = {'remanence_factor': 0.75}   # weaker magnets than planned: the coil falls short
 FAST = {'max_speed': 0.04}   # the 80 mm insertion in 2 s, not 16: the coil is what is tested
 
@@ -102,7 +102,7 @@ def test_coiling_corrects_to_the_feedback_limit_then_open_loop_then_releases(tmp
     bag = read_bag(tmp_path / 'bag')
     turns = turns_by_step(bag)
     first, total = corrections_by_step(bag)
-    # Corrected on the tracked tip angle while the plan turns at most 50 deg (steps 1-3) ...
+    # Corrected on the tracked tip angle while the plan turns at most 60 deg (steps 1-3) ...
     assert [planned_deg[k - 1] <= FEEDBACK_MAX_DEG for k in range(1, 7)] == [True] * 3 + \
         [False] * 3
     assert figures['mode'] == 'coiling' and first[4] > 0, (figures, first, total)
@@ -110,8 +110,7 @@ def test_coiling_corrects_to_the_feedback_limit_then_open_loop_then_releases(tmp
     assert total == first[4], (first, total)
     # The coil follows the plan, the weaker magnets made up for by the corrections, carried
     # on past the feedback's end: open loop this rig fell 12, 11.5 and 10.5 deg short at
-    # steps 3 to 5 (2026-12-03, the plan of the scene's own model, feedback to 60 deg),
-    # coiling 5.5, 2.4 and 0.7.
+    # steps 3 to 5 (2026-12-03), coiling 5.5, 2.4 and 0.7.
     assert sorted(turns) == [1, 2, 3, 4, 5]
     for k, turn in turns.items():
         assert abs(turn - planned_deg[k - 1]) <= (10.0 if k < 3 else 7.0), (k, turns,

@@ -15,7 +15,8 @@ DEFAULT_DEVICE_DIR = '/tmp/tentacle_sim'
 SIM_PARAMS = (
     Param('scene', '', 'the scene file: tentacle, model, path, phantom, mismatch (required)'),
     Param('schedule', '', 'a schedule file: the tentacle is the one made to its plan (the '
-          "planned magnetisation) in place of the scene's (empty: the scene's)"),
+          "planned magnetisation), simulated with the plan's sub-links, in place of the "
+          "scene's (empty: the scene's)"),
     Param('device_dir', DEFAULT_DEVICE_DIR, 'where the device links go: coil_x, coil_y, '
           'coil_z, inserter, backbone (created; one sim_node per folder)'),
     Param('coil_dialect', 'dxkdp', 'the emulated supplies: dxkdp (9600 baud, bus address 1) '

@@ -73,12 +73,14 @@ class SimNode(Node):
             self.scene = load_scene(p['scene'])
         except PlanInputError as exc:
             raise ConfigError(f'scene: {exc}') from None
-        if p['schedule']:   # the tentacle as made to this plan: its planned magnetisation
-            try:
-                planned = read_schedule(p['schedule']).tentacle_spec()
+        if p['schedule']:   # the tentacle as made to this plan: its planned magnetisation,
+            try:            # in the sub-links the plan was made in (planner.refine)
+                schedule = read_schedule(p['schedule'])
+                planned = schedule.tentacle_spec()
             except PlanInputError as exc:
                 raise ConfigError(f'schedule: {exc}') from None
-            self.scene = dataclasses.replace(self.scene, tentacle=planned)
+            model = dataclasses.replace(self.scene.model, sublinks=schedule.model.sublinks)
+            self.scene = dataclasses.replace(self.scene, tentacle=planned, model=model)
         if len(p['actuation_matrix']) != 9:
             raise ConfigError('actuation_matrix: give 9 numbers (3 x 3, row-major), T/A')
         self.period_s = 1.0 / p['camera_rate']

@@ -23,7 +23,6 @@ a line, as the emulators take on stdin; ``sim_devices.ask`` sends one). On exit 
 stop and their links go: stop the drivers first.
 """
 
-import dataclasses
 import sys
 import threading
 import time
@@ -46,7 +45,7 @@ from tentacle_sim.camera import SimCamera
 from tentacle_sim.params import NODE_NAME, SIM_PARAMS
 from tentacle_sim.rate import RateMeter
 from tentacle_sim.sim_devices import CONTROL, ControlSocket, DeviceDirBusy, SimDevices
-from tentacle_sim.world import World
+from tentacle_sim.world import made_to_plan, World
 from visualization_msgs.msg import Marker, MarkerArray
 
 FIELD_ARROW_M_PER_T = 1.0  # the field arrow: 1 mm per mT
@@ -73,14 +72,11 @@ class SimNode(Node):
             self.scene = load_scene(p['scene'])
         except PlanInputError as exc:
             raise ConfigError(f'scene: {exc}') from None
-        if p['schedule']:   # the tentacle as made to this plan: its planned magnetisation,
-            try:            # in the sub-links the plan was made in (planner.refine)
-                schedule = read_schedule(p['schedule'])
-                planned = schedule.tentacle_spec()
+        if p['schedule']:   # the tentacle as made to this plan
+            try:
+                self.scene = made_to_plan(self.scene, read_schedule(p['schedule']))
             except PlanInputError as exc:
                 raise ConfigError(f'schedule: {exc}') from None
-            model = dataclasses.replace(self.scene.model, sublinks=schedule.model.sublinks)
-            self.scene = dataclasses.replace(self.scene, tentacle=planned, model=model)
         if len(p['actuation_matrix']) != 9:
             raise ConfigError('actuation_matrix: give 9 numbers (3 x 3, row-major), T/A')
         self.period_s = 1.0 / p['camera_rate']

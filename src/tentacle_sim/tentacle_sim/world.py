@@ -12,6 +12,7 @@ detected, not modelled: the body passes through a wall, and the report says how 
 Frames: every point is in ``coils``, metres.
 """
 
+import dataclasses
 from dataclasses import dataclass
 import time
 
@@ -34,6 +35,20 @@ class Body:
     contacts: int            # links that cross a wall or an obstacle (radius included)
     contact_depth_m: float   # the deepest of those crossings, m (0 without contact)
     solve_s: float           # wall time of the solve, s
+
+
+def made_to_plan(scene, schedule):
+    """
+    Return the scene with the tentacle made to a schedule's plan, in the plan's sub-links.
+
+    Its planned magnetisation in place of the tentacle file's, simulated with as many
+    sub-links per segment as the plan was made in (the planner may polish a plan finer than
+    the scene's model: planner.refine).
+
+    :param schedule: a schedule_file.Schedule
+    """
+    model = dataclasses.replace(scene.model, sublinks=schedule.model.sublinks)
+    return dataclasses.replace(scene, tentacle=schedule.tentacle_spec(), model=model)
 
 
 class World:

@@ -1,13 +1,20 @@
 """The simulated rig's physics against independent references: the elastica, geometry."""
 
+import dataclasses
 import math
 import pathlib
 
 import numpy as np
 import pytest
 from tentacle_model.elastica import cantilever_tip
+from tentacle_planner.planner import plan_scene
 from tentacle_planner.scene import load_scene
-from tentacle_sim.world import World
+from tentacle_planner.schedule_file import read_schedule
+from tentacle_planner.schedule_writer import write_schedule_file
+from tentacle_sim.world import made_to_plan, World
+import yaml
+
+ROOT = pathlib.Path(__file__).resolve().parents[3]
 
 FIELD_T = 5e-3
 ACTUATION = np.diag([1e-3, 1e-3, 1e-3])   # 1 mT per A on each axis
@@ -98,3 +105,21 @@ def test_the_camera_sees_the_in_plane_width_and_one_stretch_of_magnets():
     assert duct.magnet_ranges_m(0.03) == [pytest.approx((0.0, 0.03))]   # five segments, one
     ribbon = World(load_scene(root / 'ch6_coiling.yaml'), ACTUATION)
     assert ribbon.body_width_m() == pytest.approx(0.002)   # 2 mm wide in the plane, 10 tall
+
+
+def test_a_plan_made_finer_than_the_scene_is_simulated_in_its_sub_links(tmp_path):
+    scene = load_scene(ROOT / 'config' / 'scenes' / 'pancreatic_duct.yaml')
+    short = dataclasses.replace(scene, insertion_steps_m=(0.01,), playback_step_m=None)
+    file = write_schedule_file(tmp_path, plan_scene(short, starts=1, iterations=10))
+    document = yaml.safe_load(file.read_text())
+    document['model']['sublinks'] = 2   # as if the planner had polished it in 2 sub-links
+    file.write_text(yaml.safe_dump(document))
+    schedule = read_schedule(file)
+    made = made_to_plan(scene, schedule)
+    assert made.model.sublinks == 2 and scene.model.sublinks == 1
+    assert made.model.dof == scene.model.dof and made.walls == scene.walls
+    planned = [s.magnetisation_a_per_m for s in schedule.tentacle_spec().segments]
+    assert np.array_equal([s.magnetisation_a_per_m for s in made.tentacle.segments], planned)
+    body = World(made, ACTUATION).step(np.zeros(3), 0.01)
+    assert len(body.points_m) == 3   # the 10 mm segment in, as 2 sub-links: 3 points
+    assert len(World(scene, ACTUATION).step(np.zeros(3), 0.01).points_m) == 2

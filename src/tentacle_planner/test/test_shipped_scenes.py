@@ -106,3 +106,44 @@ def test_scenes_nobody_tuned_for_plan_the_same_way_clear_of_their_walls(seed):
     assert shape_rms(scene, result.plan.steps) <= 0.05 * scene.tentacle.length_m
     gaps = [step_clearance(scene, step)[0] for step in result.plan.steps]
     assert min(gaps) >= 0.9 * scene.clearance_margin_m   # the margin kept (penalty: nearly)
+
+
+def s_scene(headings_deg, obstacles=()):
+    """Return a chapter 3 scene on an S-shaped path: four 14 mm headings, deg, and obstacles."""
+    headings = np.radians(headings_deg)
+    points, here = [np.zeros(3)], np.zeros(3)
+    for h in np.append(headings, headings[-1]):
+        step = np.array([math.sin(h), -math.cos(h), 0.0]) * 0.0005
+        for _ in range(28 if len(points) < 113 else 4):
+            here = here + step
+            points.append(here)
+    document = {'tentacle': '../tentacles/tentacle_chapter3.yaml',
+                'path': {'points_m': np.round(points, 9).tolist()},
+                'insertion_steps_m': [0.014, 0.028, 0.042, 0.056],
+                'coil': {'max_field_t': 0.02},
+                'model': {'dof': 1, 'gravity_m_s2': [0.0, -9.81, 0.0]},
+                'magnetisation': {'planar': True},
+                'obstacles': [{'centre_m': c.tolist(), 'radius_m': r} for c, r in obstacles]}
+    return parse_scene(document, ROOT / 'config' / 'scenes' / 's_shaped.yaml')
+
+
+def test_an_obstacle_beside_the_path_the_unaware_plan_runs_into_is_kept_off():
+    # Issue 18 part 1: an S-shaped path, a ball 0.75 mm off the path's body on the side the
+    # plan that ignores obstacles strays to (about 1 mm, at 42 mm inserted).
+    headings, off_m, ball_m = [20, 45, 15, -20], 0.00075, 0.002
+    open_scene = s_scene(headings)
+    unaware = plan_scene(open_scene).plan
+    path = open_scene.path.points_m
+    stray, where = max(((np.min(np.linalg.norm(path - p, axis=1)), p)
+                        for s in unaware.steps for p in s.points_m[1:]), key=lambda d: d[0])
+    assert stray > off_m
+    nearest = path[np.argmin(np.linalg.norm(path - where, axis=1))]
+    side = (where - nearest) / np.linalg.norm(where - nearest)
+    body_m = open_scene.tentacle.segments[0].radius_m
+    scene = s_scene(headings, [(nearest + side * (body_m + off_m + ball_m), ball_m)])
+    assert min(step_clearance(scene, s)[0] for s in unaware.steps) < 0   # it runs into it
+    aware = plan_scene(scene)
+    assert aware.flags == []
+    assert min(step_clearance(scene, s)[0] for s in aware.plan.steps) >= \
+        0.9 * scene.clearance_margin_m
+    assert shape_rms(scene, aware.plan.steps) <= 0.05 * scene.tentacle.length_m

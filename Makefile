@@ -26,7 +26,7 @@ demo-coils: $(STAMP)
 
 # Unit tests, cross-process tests over DDS and the colcon layout check.
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q --durations=20
 
 # Only the tests that need no ROS process (fast inner loop).
 test-fast: $(STAMP)

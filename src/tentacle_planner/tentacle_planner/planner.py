@@ -19,7 +19,7 @@ from tentacle_planner import paths
 from tentacle_planner.clearance import clearance
 from tentacle_planner.optimise import Constraints, KeepOff, optimise, Plan, polish, Problem
 from tentacle_planner.playback import playback
-from tentacle_planner.robustness import perturbed_problems, report, RobustProblem
+from tentacle_planner.robustness import on_the_rig, perturbed_problems, report, RobustProblem
 
 HIGHER_FIDELITY_SUBLINKS = 4  # sub-links per planning link in the re-check
 REFINE_TOLERANCE = 0.1        # the re-check may be this much (of the error) worse: confirmed
@@ -285,6 +285,7 @@ def _after_search(scene, problem, nominal, seed, iterations, robust, report_prog
     problem, nominal, checked = phase('the polish in the finer model', lambda: refine(
         scene, problem, nominal, iterations), (problem, nominal, None))
     problems = phase('the robustness report', lambda: perturbed_problems(problem), [])
+    rig = on_the_rig(problem, scene.mismatch)
     robust_plan, robust_rows = None, []
     if robust:
         robust_plan = phase('the robust plan', lambda: optimise(
@@ -296,7 +297,7 @@ def _after_search(scene, problem, nominal, seed, iterations, robust, report_prog
             skipped.append('the robust plan')
         if robust_plan is not None:
             robust_rows = phase("the robust plan's robustness report",
-                                lambda: report(problems, robust_plan, error), [])
+                                lambda: report(problems, robust_plan, error, rig), [])
     plan = robust_plan or nominal
     flags = list(plan.flags) + contact_flags(scene, plan.steps)
     dense = []
@@ -313,7 +314,8 @@ def _after_search(scene, problem, nominal, seed, iterations, robust, report_prog
         dense, dense_flags = phase('dense playback (key steps only)', dense_playback, ([], []))
         flags += dense_flags
     flags = least_contact_flag(scene, list(plan.steps) + dense) + flags
-    robustness = phase('the robustness report', lambda: report(problems, nominal, error), [])
+    robustness = phase('the robustness report', lambda: report(problems, nominal, error, rig),
+                       [])
     verification, recheck_flags = phase(
         'the re-check in fuller models', lambda: checked if checked is not None and (
             plan is nominal) else recheck(scene, plan), ([], []))

@@ -26,6 +26,7 @@ PERTURBATIONS = (
     ('insertion point 0.5 mm sideways', {'sideways_m': 0.5e-3}),
     ('base direction turned 2 deg', {'turn_rad': math.radians(2.0)}),
 )
+ON_THE_RIG = "the scene's mismatch"   # the report's row of the simulated rig (on_the_rig)
 
 
 def variant(model, spec):
@@ -48,16 +49,35 @@ def perturbed_problems(problem):
     return out
 
 
-def report(problems, plan, error=None):
+def on_the_rig(problem, mismatch):
+    """
+    Return [(name, Problem, coils)]: the plan's problem on a scene's mismatched rig, or [].
+
+    The tentacle as the scene's ``mismatch`` block makes the simulated rig's (softer, less
+    magnetised, its insertion point moved and turned) and ``coils`` (3,), the field the rig
+    makes per field commanded on each axis (its actuation matrix's columns scaled).
+    """
+    if mismatch.describe() == 'none':
+        return []
+    model = variant(problem.model, mismatch.tentacle(problem.model.spec))
+    return [(f'{ON_THE_RIG} ({mismatch.describe()})',
+             Problem(model, problem.steps_m, problem.targets, problem.constraints,
+                     problem.fixed_directions, problem.start, backbones_m=problem.backbones_m,
+                     keep_off=problem.keep_off),
+             np.asarray(mismatch.actuation_matrix_factor, dtype=float))]
+
+
+def report(problems, plan, error=None, rig=()):
     """
     Return [(name, shape RMS per step (m), shape RMS over the steps (m))] of a plan.
 
     :param problems: perturbed_problems(...)
     :param error: step -> shape RMS (m); default the optimiser's (joints and tip)
+    :param rig: on_the_rig(...): its rows last, each played with its coils' fields
     """
     rows = []
-    for name, problem in problems:
-        played = problem.plan(problem.pack(plan.directions, plan.fields_t))
+    for name, problem, coils in [(n, p, 1.0) for n, p in problems] + list(rig):
+        played = problem.plan(problem.pack(plan.directions, plan.fields_t * coils))
         per_step = [s.shape_rms_m if error is None else error(s) for s in played.steps]
         rows.append((name, per_step, float(np.sqrt(np.mean(np.square(per_step))))))
     return rows

@@ -25,6 +25,7 @@ from tentacle_model.tentacle_spec import MAX_FILE_BYTES as MAX_TENTACLE_BYTES
 from tentacle_model.user_files import load_yaml, read_capped
 from tentacle_planner.errors import PlanInputError
 from tentacle_planner.planner import magnetisation_angles_deg, shape_rms, step_clearance
+from tentacle_planner.robustness import ON_THE_RIG
 from tentacle_planner.schedule_file import FORMAT
 import yaml
 
@@ -185,6 +186,10 @@ def summary(result):
         robust_worst = max(result.robust_robustness, key=lambda row: row[2])
         lines.append(f'  robust plan: nominal {result.robust_robustness[0][2] * 1e3:.3f} mm, '
                      f'worst {robust_worst[2] * 1e3:.3f} mm ({robust_worst[0]})')
+    for rows, whose in ((result.robustness, 'the nominal plan'),
+                        (result.robust_robustness, 'the robust plan')):
+        lines += [f'  on {name}: {whose} {total * 1e3:.3f} mm' for name, _, total in rows
+                  if name.startswith(ON_THE_RIG)]
     planned = shape_rms(scene, plan.steps)
     for what, rms in result.verification:
         lines.append(f'  re-checked in {what}: shape RMS {rms * 1e3:.3f} mm '

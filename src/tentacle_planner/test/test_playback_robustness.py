@@ -126,3 +126,25 @@ def test_robustness_report_and_robust_plan(braided):
     robust_worst = max(r[2] for r in robust_rows)
     assert robust_worst < worst  # planning against them all lowers the worst case ...
     assert robust_rows[0][2] >= rows[0][2]  # ... at a price in the nominal model
+
+
+def test_the_scene_mismatch_row_plays_the_plan_on_the_rig_the_sim_makes(braided):
+    from tentacle_planner.mismatch import Mismatch
+    from tentacle_planner.robustness import on_the_rig
+    model, directions, field = truth(braided)
+    points = run(model, directions, field, KEY_M)
+    problem = Problem(model, KEY_M, [points[round(k, 12)] for k in KEY_M],
+                      Constraints(max_field_t=0.02))
+    nominal = problem.plan(problem.pack(directions, [field(k) for k in KEY_M]))
+    assert on_the_rig(problem, Mismatch()) == []               # no mismatch: no row
+    # Every coil 10% strong acts as 10% more remanence (m x B; no magnet interaction here):
+    # the row agrees with the perturbation of the report made another way.
+    rig = on_the_rig(problem, Mismatch(actuation_matrix_factor=(1.1, 1.1, 1.1)))
+    rows = report(perturbed_problems(problem), nominal, rig=rig)
+    assert rows[-1][0] == "the scene's mismatch (coils x[1.1, 1.1, 1.1])"
+    stronger = {name: total for name, _, total in rows}['remanence x1.1']
+    assert rows[-1][2] == pytest.approx(stronger, rel=1e-6) and rows[-1][2] > 1e-6
+    # One coil out: only the fields on that axis change, so the shape changes.
+    one = report([], nominal, rig=on_the_rig(problem, Mismatch(
+        actuation_matrix_factor=(1.0, 1.0, 1.5))))
+    assert one[0][2] != pytest.approx(rows[-1][2])

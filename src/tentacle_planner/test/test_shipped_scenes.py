@@ -74,16 +74,14 @@ def channel_walls(points_m, width_m):
     return tuple(Wall(points) for points in module.walls(points_m, width_m))
 
 
-def untuned_scene(seed):
+def chapter3_scene(headings_deg, name, obstacles=()):
     """
-    Return a chapter 3 scene on a random four-segment path (turns up to 12 deg a joint).
+    Return a chapter 3 scene on a path of four 14 mm straight headings, deg, with obstacles.
 
-    In a channel 3.5 mm wide (0.75 mm each side of the 2 mm body), as the pancreatic duct's.
+    :param obstacles: [(centre (3,) m, radius m)]
     """
-    rng = np.random.default_rng(seed)
-    headings = np.cumsum(rng.uniform(-12.0, 12.0, 4))
     points, here = [np.zeros(3)], np.zeros(3)
-    for h in np.radians(np.append(headings, headings[-1])):
+    for h in np.radians(np.append(headings_deg, headings_deg[-1])):
         step = np.array([math.sin(h), -math.cos(h), 0.0]) * 0.0005
         for _ in range(28 if len(points) < 113 else 4):
             here = here + step
@@ -93,8 +91,19 @@ def untuned_scene(seed):
                 'insertion_steps_m': [0.014, 0.028, 0.042, 0.056],
                 'coil': {'max_field_t': 0.02},
                 'model': {'dof': 1, 'gravity_m_s2': [0.0, -9.81, 0.0]},
-                'magnetisation': {'planar': True}}
-    scene = parse_scene(document, ROOT / 'config' / 'scenes' / f'untuned_{seed}.yaml')
+                'magnetisation': {'planar': True},
+                'obstacles': [{'centre_m': list(c), 'radius_m': r} for c, r in obstacles]}
+    return parse_scene(document, ROOT / 'config' / 'scenes' / f'{name}.yaml')
+
+
+def untuned_scene(seed):
+    """
+    Return a chapter 3 scene on a random four-segment path (turns up to 12 deg a joint).
+
+    In a channel 3.5 mm wide (0.75 mm each side of the 2 mm body), as the pancreatic duct's.
+    """
+    headings = np.cumsum(np.random.default_rng(seed).uniform(-12.0, 12.0, 4))
+    scene = chapter3_scene(headings, f'untuned_{seed}')
     return replace(scene, walls=channel_walls(scene.path.points_m, 3.5e-3))
 
 
@@ -108,30 +117,11 @@ def test_scenes_nobody_tuned_for_plan_the_same_way_clear_of_their_walls(seed):
     assert min(gaps) >= 0.9 * scene.clearance_margin_m   # the margin kept (penalty: nearly)
 
 
-def s_scene(headings_deg, obstacles=()):
-    """Return a chapter 3 scene on an S-shaped path: four 14 mm headings, deg, and obstacles."""
-    headings = np.radians(headings_deg)
-    points, here = [np.zeros(3)], np.zeros(3)
-    for h in np.append(headings, headings[-1]):
-        step = np.array([math.sin(h), -math.cos(h), 0.0]) * 0.0005
-        for _ in range(28 if len(points) < 113 else 4):
-            here = here + step
-            points.append(here)
-    document = {'tentacle': '../tentacles/tentacle_chapter3.yaml',
-                'path': {'points_m': np.round(points, 9).tolist()},
-                'insertion_steps_m': [0.014, 0.028, 0.042, 0.056],
-                'coil': {'max_field_t': 0.02},
-                'model': {'dof': 1, 'gravity_m_s2': [0.0, -9.81, 0.0]},
-                'magnetisation': {'planar': True},
-                'obstacles': [{'centre_m': c.tolist(), 'radius_m': r} for c, r in obstacles]}
-    return parse_scene(document, ROOT / 'config' / 'scenes' / 's_shaped.yaml')
-
-
 def test_an_obstacle_beside_the_path_the_unaware_plan_runs_into_is_kept_off():
     # Issue 18 part 1: an S-shaped path, a ball 0.75 mm off the path's body on the side the
     # plan that ignores obstacles strays to (about 1 mm, at 42 mm inserted).
     headings, off_m, ball_m = [20, 45, 15, -20], 0.00075, 0.002
-    open_scene = s_scene(headings)
+    open_scene = chapter3_scene(headings, 's_shaped')
     unaware = plan_scene(open_scene).plan
     path = open_scene.path.points_m
     stray, where = max(((np.min(np.linalg.norm(path - p, axis=1)), p)
@@ -140,7 +130,8 @@ def test_an_obstacle_beside_the_path_the_unaware_plan_runs_into_is_kept_off():
     nearest = path[np.argmin(np.linalg.norm(path - where, axis=1))]
     side = (where - nearest) / np.linalg.norm(where - nearest)
     body_m = open_scene.tentacle.segments[0].radius_m
-    scene = s_scene(headings, [(nearest + side * (body_m + off_m + ball_m), ball_m)])
+    scene = chapter3_scene(headings, 's_shaped',
+                           [(nearest + side * (body_m + off_m + ball_m), ball_m)])
     assert min(step_clearance(scene, s)[0] for s in unaware.steps) < 0   # it runs into it
     aware = plan_scene(scene)
     assert aware.flags == []

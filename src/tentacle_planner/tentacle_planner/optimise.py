@@ -32,6 +32,7 @@ import signal
 
 import numpy as np
 from scipy.optimize import least_squares, minimize
+from threadpoolctl import threadpool_limits
 from tentacle_planner.clearance import link_gap_gradients, link_gaps
 
 MILLITESLA = 1e-3  # field unknowns are in mT: of the order of the angles, for the optimiser
@@ -677,8 +678,12 @@ def _fit_in_worker(job):
     return _WORKER_FITTER.run(job), _WORKER_FITTER.problem.evaluations - before
 
 
+_WORKER_BLAS = []   # a worker's one-thread BLAS limit, held for its life
+
+
 def _quiet_worker():
     signal.signal(signal.SIGINT, signal.SIG_IGN)   # Ctrl-C is the parent's to handle
+    _WORKER_BLAS.append(threadpool_limits(limits=1, user_api='blas'))
 
 
 class _Fitter:
@@ -728,12 +733,18 @@ class _Fitter:
     def workers(self, count):
         """Run submitted starts in count - 1 forked processes while inside (1: here)."""
         global _WORKER_FITTER
+        # One BLAS thread here and in every worker, whatever the count: the matrices are
+        # small, and two processes' BLAS threads contending for two cores made a round of
+        # two starts 1.5 times as long (pancreatic_duct); the same threads for any count
+        # keep the plans the same.
+        blas = threadpool_limits(limits=1, user_api='blas')
         if count > 1:
             _WORKER_FITTER = self
             self.pool = multiprocessing.get_context('fork').Pool(count - 1, _quiet_worker)
         try:
             yield self
         finally:
+            blas.restore_original_limits()
             if self.pool is not None:
                 self.pool.terminate()
                 self.pool.join()

@@ -32,8 +32,8 @@ import signal
 
 import numpy as np
 from scipy.optimize import least_squares, minimize
-from threadpoolctl import threadpool_limits
 from tentacle_planner.clearance import link_gap_gradients, link_gaps
+from threadpoolctl import threadpool_limits
 
 MILLITESLA = 1e-3  # field unknowns are in mT: of the order of the angles, for the optimiser
 MIN_STABILITY_MARGIN = 0.1
@@ -44,7 +44,6 @@ STAGE_GOOD = 1e-6       # a stage of the insertion-order start this close needs 
 MARGIN_STEP = 1e-4      # forward-difference step of the margin's derivative (rad, mT)
 KEEP_OFF_WEIGHT = 10.0  # a link this far inside the margin costs 10 times the shape error
 NEIGHBOUR_WEIGHTS = (0.03, 0.3, 3.0)  # the neighbour-angle residuals' weights in turn (polish)
-GOOD_ENOUGH = 1e-6      # an objective this small (a shape error of 0.1% of L) ends a search
 ROUND_STARTS = 2        # random starts a round: fitted side by side on two cores
 
 
@@ -560,16 +559,23 @@ def _linear(matrix, limit):
             'jac': lambda x: -matrix / MILLITESLA}
 
 
-def optimise(problem, *, seed=0, starts=8, iterations=100, initial=None, progress=None,
-             first_stage=False, min_gain=None, workers=1):
+def optimise(problem, **options):
+    """Return the best Plan over a seeded multi-start: leading(problem, keep=1, ...)[0]."""
+    return leading(problem, keep=1, **options)[0]
+
+
+def leading(problem, *, keep=2, seed=0, starts=8, iterations=100, initial=None, progress=None,
+            first_stage=False, min_gain=None, workers=1):
     """
-    Return the best Plan over a seeded multi-start, each start fitted by Gauss-Newton.
+    Return the keep best Plans, best first, of a seeded multi-start fitted by Gauss-Newton.
 
-    A start is the insertion-order start (the rig's own order, its stages' tries drawn from
-    the start's own seed), or for other objectives (the torque balance) a random one. They
-    come in rounds of ROUND_STARTS, fitted side by side by ``workers`` processes; the
-    rounds, and so the plan, are the same for any number of workers.
+    Fewer where fewer starts were fitted (one after Ctrl-C: the best so far). A start is the
+    insertion-order start (the rig's own order, its stages' tries drawn from the start's own
+    seed), or for other objectives (the torque balance) a random one. They come in rounds of
+    ROUND_STARTS, fitted side by side by ``workers`` processes; the rounds, and so the plan,
+    are the same for any number of workers.
 
+    :param keep: plans to return, at most
     :param starts: starts, at most (1 where only fields are unknown: the steps separate)
     :param iterations: model evaluations per start (and SLSQP iterations where limits other
         than per-axis bounds apply): the budget that ends each start
@@ -580,8 +586,8 @@ def optimise(problem, *, seed=0, starts=8, iterations=100, initial=None, progres
     :param first_stage: fit each start on the thesis' torque balance first (balance.py),
         then on the forward model
     :param min_gain: end the search once a round lowers the best objective by less than
-        this fraction of it (the first round: its second start against its first), or once
-        it is under GOOD_ENOUGH (None: every start)
+        this fraction of it (not after the first round, nor while the best plan is flagged
+        or touches a wall; None or 0: every start)
     :param workers: processes fitting a round's starts side by side (forked from this one)
     """
     from tentacle_planner.balance import BalanceProblem  # it builds on this module
@@ -601,7 +607,6 @@ def optimise(problem, *, seed=0, starts=8, iterations=100, initial=None, progres
     search = _Search(problem, (initial is not None) + starts, progress)
     try:
         with fitter.workers(workers if (initial is not None) + starts > 1 else 1):
-            reference = None
             while True:
                 batch = list(itertools.islice(jobs, ROUND_STARTS))
                 if not batch:
@@ -609,29 +614,30 @@ def optimise(problem, *, seed=0, starts=8, iterations=100, initial=None, progres
                 before = search.best_objective
                 pending = [fitter.submit(job) for job in batch[:-1]]
                 search.consider(fitter.run(batch[-1], progress))   # the last one: here
-                reference = search.best_objective if before is None else before
                 for result in pending:
                     search.consider(result())
                 best = search.best_objective
-                if min_gain is not None and (best < GOOD_ENOUGH
-                                             or reference - best < min_gain * reference):
+                # Not on an objective alone, however small: a plan the planning model
+                # fits exactly may be one the finer model does not reproduce (refine).
+                if min_gain and before is not None and search.clean and \
+                        before - best < min_gain * before:
                     break
     except StartInterrupted as exc:
         # Ctrl-C while this process built an insertion-order start (all of a fields-only
         # search): the best plan so far, or the steps fitted, the rest holding the last field.
         if search.best is not None:
-            return search.interrupted(fitter)
+            return [search.interrupted(fitter)]
         plan = problem.plan(np.clip(exc.x, *_limits(problem)))
-        return replace(plan, interrupted=True,
-                       flags=plan.flags + [f'interrupted: the best plan so far (the first '
-                                           f'{exc.fitted} of {len(problem.steps_m)} '
-                                           'steps fitted)'])
+        return [replace(plan, interrupted=True,
+                        flags=plan.flags + [f'interrupted: the best plan so far (the first '
+                                            f'{exc.fitted} of {len(problem.steps_m)} '
+                                            'steps fitted)'])]
     except KeyboardInterrupt:
         # Ctrl-C keeps the best plan so far (or the start itself, if none is done).
         if search.best is None and fitter.last_start is None:
             raise
-        return search.interrupted(fitter)
-    return search.best
+        return [search.interrupted(fitter)]
+    return [plan for _, _, plan in search.ranked[:keep]]
 
 
 class _Search:
@@ -644,7 +650,17 @@ class _Search:
 
     def __init__(self, problem, total, progress):
         self.problem, self.total, self.progress = problem, total, progress
-        self.best, self.key, self.done = None, None, 0
+        self.ranked, self.done = [], 0   # [(key, order, plan)], best first
+
+    @property
+    def best(self):
+        """Return the best plan so far (None before any)."""
+        return self.ranked[0][2] if self.ranked else None
+
+    @property
+    def clean(self):
+        """Return whether the best plan so far has no flag and touches nothing."""
+        return bool(self.ranked) and self.ranked[0][0][:2] == (0, 0.0)
 
     @property
     def best_objective(self):
@@ -655,8 +671,8 @@ class _Search:
         """Take a fitted x as a candidate."""
         plan = self.problem.plan(x)
         key = (len(plan.flags), self.problem.deepest_contact_m(plan), plan.objective)
-        if self.key is None or key < self.key:
-            self.best, self.key = plan, key
+        self.ranked.append((key, self.done, plan))
+        self.ranked.sort(key=lambda entry: entry[:2])   # of equals, the earlier start
         self.done += 1
         if self.progress is not None:
             self.progress(self.done, self.total, self.best.objective)
@@ -684,6 +700,38 @@ _WORKER_BLAS = []   # a worker's one-thread BLAS limit, held for its life
 def _quiet_worker():
     signal.signal(signal.SIGINT, signal.SIG_IGN)   # Ctrl-C is the parent's to handle
     _WORKER_BLAS.append(threadpool_limits(limits=1, user_api='blas'))
+
+
+_SIDE_BY_SIDE = None   # the function side_by_side's forked workers call (set before the fork)
+
+
+def _call_in_worker(item):
+    return _SIDE_BY_SIDE(item)
+
+
+def side_by_side(function, items, workers):
+    """
+    Return [function(item) for item in items], run side by side in up to workers processes.
+
+    The first here, the others in workers forked from this process (function need not be
+    picklable; its results must be), all on one BLAS thread: the same results for any number
+    of workers.
+    """
+    global _SIDE_BY_SIDE
+    items = list(items)
+    with threadpool_limits(limits=1, user_api='blas'):
+        if workers < 2 or len(items) < 2:
+            return [function(item) for item in items]
+        _SIDE_BY_SIDE = function
+        pool = multiprocessing.get_context('fork').Pool(min(workers, len(items)) - 1,
+                                                        _quiet_worker)
+        try:
+            pending = [pool.apply_async(_call_in_worker, (item,)) for item in items[1:]]
+            return [function(items[0])] + [result.get() for result in pending]
+        finally:
+            pool.terminate()
+            pool.join()
+            _SIDE_BY_SIDE = None
 
 
 class _Fitter:

@@ -2,7 +2,8 @@
 tentacle-plan: a magnetisation profile and field schedule for a scene, verified.
 
     tentacle-plan --scene config/scenes/NAME.yaml --out DIR [--seed N] [--starts N]
-                  [--baseline tip-driven] [--robust] [--first-stage torque-balance]
+                  [--min-gain F] [--baseline tip-driven] [--robust]
+                  [--first-stage torque-balance]
     tentacle-plan --tentacle FILE --path FILE --out DIR [--steps M,M,...] [limits...]
 
 Writes DIR/schedule.yaml (DESIGN.md's schema) and DIR/plan.png and prints a summary. Exit
@@ -65,6 +66,10 @@ def build_parser():
                         help='seeds the multi-start: a whole number >= 0')
     parser.add_argument('--starts', type=_whole(1, MAX_STARTS), default=8,
                         help=f'starts of the multi-start, 1 to {MAX_STARTS} (default 8)')
+    parser.add_argument('--min-gain', type=_fraction, default=0.1,
+                        help='end the search once a round of two starts lowers the best '
+                        'objective by less than this fraction, 0 to 1 (default 0.1; 0: '
+                        'every start, the exhaustive search)')
     parser.add_argument('--iterations', type=_whole(1, MAX_ITERATIONS), default=100,
                         help=f'model evaluations per start, 1 to {MAX_ITERATIONS} (default 100)')
     parser.add_argument('--baseline', choices=('tip-driven',), default=None,
@@ -90,6 +95,17 @@ def _whole(low, high=None):
                                       else f'>= {low}'))
         return value
     return parse
+
+
+def _fraction(text):
+    """Return a number from 0 to 1 (argparse type)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected a number, got {text!r}') from None
+    if not 0.0 <= value <= 1.0:   # NaN too
+        raise argparse.ArgumentTypeError(f'{text} is not from 0 to 1')
+    return value
 
 
 def _lengths(text):
@@ -183,7 +199,7 @@ def main(args=None):
             return 2
         scene = _scene(opts)
         result = plan_scene(scene, seed=opts.seed, starts=opts.starts,
-                            iterations=opts.iterations,
+                            iterations=opts.iterations, min_gain=opts.min_gain,
                             tip_driven=opts.baseline == 'tip-driven', robust=opts.robust,
                             progress=_progress,
                             first_stage=opts.first_stage == 'torque-balance')

@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 from tentacle_model.model import TentacleModel
 from tentacle_model.tentacle_spec import load_tentacle
-from tentacle_planner.optimise import Constraints, optimise, Problem, STABILITY_WEIGHT
+from tentacle_planner.optimise import (Constraints, KeepOff, leading, optimise, Problem,
+                                       side_by_side, STABILITY_WEIGHT)
+from tentacle_planner.scene import Sphere
 
 ROOT = pathlib.Path(__file__).resolve().parents[3]
 STEPS_M = (0.02, 0.03, 0.04, 0.05)
@@ -261,10 +263,39 @@ def test_the_search_stops_once_a_round_gains_too_little(braided):
             calls.append((done, total))
     # Targets shrunk to 0.8 of the known plan's shape: out of reach, no start is exact.
     problem = Problem(model, STEPS_M, [t * 0.8 for t in targets], constraints)
-    every = optimise(problem, seed=0, starts=4, progress=progress)
-    assert [c[0] for c in calls] == [1, 2, 3, 4]
+    every = optimise(problem, seed=0, starts=6, progress=progress)
+    assert [c[0] for c in calls] == [1, 2, 3, 4, 5, 6]
     calls.clear()
     problem = Problem(model, STEPS_M, [t * 0.8 for t in targets], constraints)
-    early = optimise(problem, seed=0, starts=4, min_gain=1.0, progress=progress)
-    assert [c[0] for c in calls] == [1, 2]       # the first round, and no gain can be 100%
-    assert early.objective >= every.objective    # the first round's best, not more
+    early = optimise(problem, seed=0, starts=6, min_gain=1.0, progress=progress)
+    assert [c[0] for c in calls] == [1, 2, 3, 4]   # two rounds: no gain can be 100%
+    assert early.objective >= every.objective      # the first two rounds' best, not more
+
+
+def test_the_search_goes_on_while_its_best_plan_touches(braided):
+    # A ball around the insertion point: every plan runs into it, so no round's small gain
+    # ends the search early; the two best plans come back, best first.
+    constraints = Constraints(max_field_t=0.02)
+    model, _, targets = known_plan(braided, 3, constraints)
+    ball = Sphere(centre_m=targets[0][0], radius_m=0.003)
+    calls = []
+    problem = Problem(model, STEPS_M, targets, constraints, keep_off=KeepOff(spheres=(ball,)))
+    plans = leading(problem, keep=2, seed=0, starts=6, iterations=20, min_gain=1.0,
+                    progress=lambda done, total, best: calls.append(done) if best else None)
+    assert calls == [1, 2, 3, 4, 5, 6]
+    assert [problem.deepest_contact_m(p) > 0 for p in plans] == [True, True]
+    keys = [(len(p.flags), problem.deepest_contact_m(p), p.objective) for p in plans]
+    assert keys == sorted(keys)
+
+
+def test_side_by_side_gives_what_one_process_gives_in_order():
+    # The function is a closure (not picklable): the workers are forked with it.
+    scale = np.linspace(1.0, 2.0, 5)
+
+    def work(k):
+        a = np.random.default_rng(k).normal(size=(40, 40)) * scale[k % 5]
+        return k, float(np.linalg.svd(a @ a.T, compute_uv=False)[0])
+
+    alone = side_by_side(work, range(5), workers=1)
+    assert [k for k, _ in alone] == [0, 1, 2, 3, 4]
+    assert side_by_side(work, range(5), workers=2) == alone

@@ -138,3 +138,11 @@ def test_an_obstacle_beside_the_path_the_unaware_plan_runs_into_is_kept_off():
     assert min(step_clearance(scene, s)[0] for s in aware.plan.steps) >= \
         0.9 * scene.clearance_margin_m
     assert shape_rms(scene, aware.plan.steps) <= 0.05 * scene.tentacle.length_m
+
+
+def test_refinements_double_the_sub_links_up_to_the_re_check():
+    from tentacle_planner.planner import refinements
+    assert refinements(1, 4) == [2, 4]
+    assert refinements(1, 3) == [2, 3]
+    assert refinements(2, 4) == [4]
+    assert refinements(4, 4) == []

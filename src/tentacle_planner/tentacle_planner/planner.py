@@ -49,7 +49,7 @@ class SceneResult:
     nominal_plan: Plan              # planned against the nominal model
     robust_plan: Plan | None
     playback_steps: list            # dense Steps, or [] without playback_step_m
-    robustness: list                # [(perturbation, per-step RMS, RMS)] of the nominal plan
+    robustness: list                # [(perturbation, per-step RMS, RMS, contact)]: nominal plan
     robust_robustness: list         # the same for the robust plan, or []
     verification: list              # [(what, RMS)]: the plan re-checked in fuller models
     flags: list = field(default_factory=list)

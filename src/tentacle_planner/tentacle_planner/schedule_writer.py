@@ -84,7 +84,8 @@ def schedule_document(result):
 
     def robustness(rows):
         return [{'model': name, 'shape_rms_m': round(total, 9),
-                 'per_step_m': [round(v, 9) for v in per_step]} for name, per_step, total in rows]
+                 'per_step_m': [round(v, 9) for v in per_step],
+                 'contact_depth_m': round(depth, 9)} for name, per_step, total, depth in rows]
     document = {
         'format': FORMAT,
         'scene': {'name': scene.name, 'sha256': scene.sha256},
@@ -178,18 +179,22 @@ def summary(result):
     lines.append(f'  magnetisation{given} (azimuth, elevation in the link frame, deg): '
                  + ', '.join(f'{i + 1}: ({angles[i, 0]:.1f}, {angles[i, 1]:.1f})'
                              for i, d in enumerate(plan.directions) if np.any(d)))
-    if result.robustness:  # none when Ctrl-C left the report out
-        worst = max(result.robustness, key=lambda row: row[2])
-        lines.append(f'  robustness: nominal {result.robustness[0][2] * 1e3:.3f} mm, worst '
-                     f'{worst[2] * 1e3:.3f} mm ({worst[0]})')
-    if result.robust_plan is not None and result.robust_robustness:
-        robust_worst = max(result.robust_robustness, key=lambda row: row[2])
-        lines.append(f'  robust plan: nominal {result.robust_robustness[0][2] * 1e3:.3f} mm, '
-                     f'worst {robust_worst[2] * 1e3:.3f} mm ({robust_worst[0]})')
+    walls = bool(scene.obstacles or scene.walls)
+    for rows, whose in ((result.robustness, 'robustness: nominal'),
+                        (result.robust_robustness, 'robust plan: nominal')):
+        if not rows:   # none when Ctrl-C left the report out, or without --robust
+            continue
+        worst = max(rows, key=lambda row: row[2])
+        deepest = max(rows, key=lambda row: row[3])
+        lines.append(f'  {whose} {rows[0][2] * 1e3:.3f} mm, worst {worst[2] * 1e3:.3f} mm '
+                     f'({worst[0]})' + (f'; into a wall up to {deepest[3] * 1e3:.3f} mm '
+                                        f'({deepest[0]})' if deepest[3] > 0 else
+                                        '; off the walls in every model' if walls else ''))
     for rows, whose in ((result.robustness, 'the nominal plan'),
                         (result.robust_robustness, 'the robust plan')):
-        lines += [f'  on {name}: {whose} {total * 1e3:.3f} mm' for name, _, total in rows
-                  if name.startswith(ON_THE_RIG)]
+        lines += [f'  on {name}: {whose} {total * 1e3:.3f} mm'
+                  + (f', {depth * 1e3:.3f} mm into a wall' if depth > 0 else '')
+                  for name, _, total, depth in rows if name.startswith(ON_THE_RIG)]
     planned = shape_rms(scene, plan.steps)
     for what, rms in result.verification:
         lines.append(f'  re-checked in {what}: shape RMS {rms * 1e3:.3f} mm '

@@ -142,9 +142,35 @@ def test_the_scene_mismatch_row_plays_the_plan_on_the_rig_the_sim_makes(braided)
     rig = on_the_rig(problem, Mismatch(actuation_matrix_factor=(1.1, 1.1, 1.1)))
     rows = report(perturbed_problems(problem), nominal, rig=rig)
     assert rows[-1][0] == "the scene's mismatch (coils x[1.1, 1.1, 1.1])"
-    stronger = {name: total for name, _, total in rows}['remanence x1.1']
+    stronger = {name: total for name, _, total, _ in rows}['remanence x1.1']
     assert rows[-1][2] == pytest.approx(stronger, rel=1e-6) and rows[-1][2] > 1e-6
     # One coil out: only the fields on that axis change, so the shape changes.
     one = report([], nominal, rig=on_the_rig(problem, Mismatch(
         actuation_matrix_factor=(1.0, 1.0, 1.5))))
     assert one[0][2] != pytest.approx(rows[-1][2])
+
+
+def test_the_report_says_how_deep_each_model_runs_into_an_obstacle(braided):
+    from tentacle_planner.clearance import clearance
+    from tentacle_planner.optimise import KeepOff
+    from tentacle_planner.scene import Sphere
+    model, directions, field = truth(braided)
+    points = run(model, directions, field, KEY_M)
+    targets = [points[round(k, 12)] for k in KEY_M]
+    plain = Problem(model, KEY_M, targets, Constraints(max_field_t=0.02))
+    x = plain.pack(directions, [field(k) for k in KEY_M])
+    # A ball 0.05 mm off the nominal tip's capsule, on the side a 10% stronger magnet bends to.
+    stronger = dict(perturbed_problems(plain))['remanence x1.1'].plan(x).steps[-1].points_m[-1]
+    tip = targets[-1][-1]
+    radius_m, body_m = 1e-3, braided.segments[-1].radius_m
+    ball = Sphere(tip + (stronger - tip) / np.linalg.norm(stronger - tip)
+                  * (radius_m + body_m + 5e-5), radius_m)
+    problem = Problem(model, KEY_M, targets, Constraints(max_field_t=0.02),
+                      keep_off=KeepOff(spheres=(ball,)))
+    nominal = problem.plan(x)
+    rows = {name: depth for name, _, _, depth in report(perturbed_problems(problem), nominal)}
+    assert rows['nominal'] == 0.0 and rows['remanence x1.1'] > 0.0
+    for name, p in perturbed_problems(problem):   # clearance.py's own account of each model
+        played = p.plan(x)
+        gap = min(clearance(s.points_m, s.link_radii_m, (ball,))[0] for s in played.steps)
+        assert rows[name] == pytest.approx(max(0.0, -gap), abs=1e-12)

@@ -21,7 +21,8 @@ from tentacle_planner.clearance import clearance
 from tentacle_planner.optimise import (Constraints, KeepOff, leading, optimise, Plan, polish,
                                        Problem, side_by_side)
 from tentacle_planner.playback import playback
-from tentacle_planner.robustness import on_the_rig, perturbed_problems, report, RobustProblem
+from tentacle_planner.robustness import (on_the_rig, perturbed_problems, played_densely,
+                                         report, RobustProblem)
 
 HIGHER_FIDELITY_SUBLINKS = 4  # sub-links per planning link in the re-check
 REFINE_TOLERANCE = 0.1        # the re-check may be this much (of the error) worse: confirmed
@@ -364,6 +365,10 @@ def _after_search(scene, problem, found, seed, iterations, robust, report_progre
     flags = least_contact_flag(scene, list(plan.steps) + dense) + flags
     robustness = phase('the robustness report', lambda: report(problems, nominal, error, rig),
                        [])
+    if dense and (robustness if robust_plan is None else robust_rows):
+        # the plan played: its own rows gain the rig's row for every playback step
+        (robustness if robust_plan is None else robust_rows).extend(phase(
+            'the robustness report', lambda: played_densely(rig, plan, dense, error), []))
     verification, recheck_flags = phase(
         'the re-check in fuller models', lambda: checked if checked is not None and (
             plan is nominal) else recheck(scene, plan), ([], []))

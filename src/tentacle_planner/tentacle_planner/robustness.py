@@ -90,6 +90,36 @@ def report(problems, plan, error=None, rig=()):
     return rows
 
 
+def played_densely(rig, plan, steps, error=None):
+    """
+    Return report's rows for on_the_rig's: the plan's every playback step, as the rig runs it.
+
+    The rig plays each dense step's field in turn, each from the equilibrium of the step
+    before; the key steps alone (report) start each step from the key step before, and can
+    end on another equilibrium where the body is bistable.
+
+    :param rig: on_the_rig(...)
+    :param steps: the plan's dense playback Steps (their fields and inserted lengths)
+    :param error: step -> shape RMS (m); default the optimiser's (joints and tip, here 0:
+        the dense steps have no targets of their own)
+    """
+    rows = []
+    lengths = [s.inserted_m for s in steps]
+    fields = np.array([s.field_t for s in steps])
+    for name, problem, coils in rig:
+        model = problem.model
+        dense = Problem(model, lengths, [np.zeros((model.chain(length).size + 1, 3))
+                                         for length in lengths],
+                        problem.constraints, problem.fixed_directions, problem.start,
+                        backbones_m=[s.backbone_m for s in steps], keep_off=problem.keep_off)
+        played = dense.plan(dense.pack(plan.directions, fields * coils))
+        per_step = [s.shape_rms_m if error is None else error(s) for s in played.steps]
+        rows.append((f'{name}, every playback step', per_step,
+                     float(np.sqrt(np.mean(np.square(per_step)))),
+                     dense.deepest_contact_m(played)))
+    return rows
+
+
 class RobustProblem:
     """Every perturbed model's residuals at once, for one set of unknowns."""
 

@@ -174,3 +174,27 @@ def test_the_report_says_how_deep_each_model_runs_into_an_obstacle(braided):
         played = p.plan(x)
         gap = min(clearance(s.points_m, s.link_radii_m, (ball,))[0] for s in played.steps)
         assert rows[name] == pytest.approx(max(0.0, -gap), abs=1e-12)
+
+
+def test_the_rig_row_played_densely_runs_every_step_from_the_one_before(braided):
+    from tentacle_planner.mismatch import Mismatch
+    from tentacle_planner.optimise import Step
+    from tentacle_planner.robustness import on_the_rig, played_densely
+    model, directions, field = truth(braided)
+    points = run(model, directions, field, KEY_M)
+    problem = Problem(model, KEY_M, [points[round(k, 12)] for k in KEY_M],
+                      Constraints(max_field_t=0.02))
+    nominal = problem.plan(problem.pack(directions, [field(k) for k in KEY_M]))
+    coils = np.array([1.05, 1.0, 0.95])
+    rig = on_the_rig(problem, Mismatch(remanence_factor=0.9, actuation_matrix_factor=coils))
+    lengths = dense_lengths(list(KEY_M), 0.002)
+    steps = [Step(length, field(length), None, 0.0, 0.0, 0.0, True) for length in lengths]
+    [(name, per_step, _, depth)] = played_densely(rig, nominal, steps,
+                                                  lambda s: float(s.points_m[-1][1]))
+    assert name.endswith(', every playback step') and depth == 0.0   # nothing to touch
+    # The mismatched tentacle run here step by step, warm-started, in the coils' fields:
+    truth_tips = run(rig[0][1].model, directions, lambda length: field(length) * coils,
+                     lengths)
+    assert per_step == pytest.approx([truth_tips[round(length, 12)][-1][1]
+                                      for length in lengths], abs=1e-12)
+    assert len(per_step) == len(lengths) > len(KEY_M)

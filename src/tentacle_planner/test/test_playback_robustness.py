@@ -48,6 +48,16 @@ def run(model, directions, field, lengths):
     return out
 
 
+def known_plan(spec, **options):
+    """Return (model, directions, field, problem, plan): truth's plan and its key steps."""
+    model, directions, field = truth(spec)
+    points = run(model, directions, field, KEY_M)
+    problem = Problem(model, KEY_M, [points[round(k, 12)] for k in KEY_M],
+                      Constraints(max_field_t=0.02), **options)
+    return model, directions, field, problem, problem.plan(
+        problem.pack(directions, [field(k) for k in KEY_M]))
+
+
 def test_dense_lengths_include_every_key_step():
     assert dense_lengths([0.0025, 0.004], 0.001) == [0.001, 0.002, 0.0025, 0.003, 0.004]
 
@@ -109,11 +119,7 @@ def test_perturbations_change_what_they_say(braided):
 
 
 def test_robustness_report_and_robust_plan(braided):
-    model, directions, field = truth(braided)
-    points = run(model, directions, field, KEY_M)
-    constraints = Constraints(max_field_t=0.02)
-    problem = Problem(model, KEY_M, [points[round(k, 12)] for k in KEY_M], constraints)
-    nominal = problem.plan(problem.pack(directions, [field(k) for k in KEY_M]))
+    _, _, _, problem, nominal = known_plan(braided)
     problems = perturbed_problems(problem)
     rows = report(problems, nominal)
     assert [r[0] for r in rows][0] == 'nominal' and len(rows) == 7
@@ -131,11 +137,7 @@ def test_robustness_report_and_robust_plan(braided):
 def test_the_scene_mismatch_row_plays_the_plan_on_the_rig_the_sim_makes(braided):
     from tentacle_planner.mismatch import Mismatch
     from tentacle_planner.robustness import on_the_rig
-    model, directions, field = truth(braided)
-    points = run(model, directions, field, KEY_M)
-    problem = Problem(model, KEY_M, [points[round(k, 12)] for k in KEY_M],
-                      Constraints(max_field_t=0.02))
-    nominal = problem.plan(problem.pack(directions, [field(k) for k in KEY_M]))
+    model, directions, field, problem, nominal = known_plan(braided)
     assert on_the_rig(problem, Mismatch()) == []               # no mismatch: no row
     # Every coil 10% strong acts as 10% more remanence (m x B; no magnet interaction here):
     # the row agrees with the perturbation of the report made another way.
@@ -154,20 +156,15 @@ def test_the_report_says_how_deep_each_model_runs_into_an_obstacle(braided):
     from tentacle_planner.clearance import clearance
     from tentacle_planner.optimise import KeepOff
     from tentacle_planner.scene import Sphere
-    model, directions, field = truth(braided)
-    points = run(model, directions, field, KEY_M)
-    targets = [points[round(k, 12)] for k in KEY_M]
-    plain = Problem(model, KEY_M, targets, Constraints(max_field_t=0.02))
-    x = plain.pack(directions, [field(k) for k in KEY_M])
+    _, _, _, plain, unaware = known_plan(braided)
+    x = plain.pack(unaware.directions, unaware.fields_t)
     # A ball 0.05 mm off the nominal tip's capsule, on the side a 10% stronger magnet bends to.
     stronger = dict(perturbed_problems(plain))['remanence x1.1'].plan(x).steps[-1].points_m[-1]
-    tip = targets[-1][-1]
+    tip = plain.targets[-1][-1]
     radius_m, body_m = 1e-3, braided.segments[-1].radius_m
     ball = Sphere(tip + (stronger - tip) / np.linalg.norm(stronger - tip)
                   * (radius_m + body_m + 5e-5), radius_m)
-    problem = Problem(model, KEY_M, targets, Constraints(max_field_t=0.02),
-                      keep_off=KeepOff(spheres=(ball,)))
-    nominal = problem.plan(x)
+    _, _, _, problem, nominal = known_plan(braided, keep_off=KeepOff(spheres=(ball,)))
     rows = {name: depth for name, _, _, depth in report(perturbed_problems(problem), nominal)}
     assert rows['nominal'] == 0.0 and rows['remanence x1.1'] > 0.0
     for name, p in perturbed_problems(problem):   # clearance.py's own account of each model
@@ -180,11 +177,7 @@ def test_the_rig_row_played_densely_runs_every_step_from_the_one_before(braided)
     from tentacle_planner.mismatch import Mismatch
     from tentacle_planner.optimise import Step
     from tentacle_planner.robustness import on_the_rig, played_densely
-    model, directions, field = truth(braided)
-    points = run(model, directions, field, KEY_M)
-    problem = Problem(model, KEY_M, [points[round(k, 12)] for k in KEY_M],
-                      Constraints(max_field_t=0.02))
-    nominal = problem.plan(problem.pack(directions, [field(k) for k in KEY_M]))
+    model, directions, field, problem, nominal = known_plan(braided)
     coils = np.array([1.05, 1.0, 0.95])
     rig = on_the_rig(problem, Mismatch(remanence_factor=0.9, actuation_matrix_factor=coils))
     lengths = dense_lengths(list(KEY_M), 0.002)

@@ -149,10 +149,14 @@ class Player:
         """Start at the first step; return the Command. Refused (ValueError) unless idle."""
         if self.phase is not Phase.IDLE:
             raise ValueError(f'the run is {self.phase.value}: start a new run to play again')
-        for axis, start in self.start_m.items():
-            where = seen.positions_m.get(axis)
-            if where is None:
+        # Every stage the run will command, not only those it starts from (a coiling run
+        # starts the backbone wherever it is): without a reading the run would pause at once.
+        commanded = dict.fromkeys([*self.start_m, *(a for s in self.steps for a in s.targets_m)])
+        for axis in commanded:
+            if seen.positions_m.get(axis) is None:
                 raise ValueError(f'no position from the {axis} yet: is its node running?')
+        for axis, start in self.start_m.items():
+            where = seen.positions_m[axis]
             if abs(where - start) > self.settings.start_tolerance_m:
                 raise ValueError(f'the {axis} is at {where * 1e3:.2f} mm; this run starts at '
                                  f'{start * 1e3:.2f} mm (home it there, or play the other way)')

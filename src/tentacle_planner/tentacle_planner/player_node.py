@@ -213,8 +213,11 @@ class PlayerNode(Node):
             [f'the limits of {self.p["coils_node"]}']
         if self.seen.field_t is None:
             missing.append(contract.FIELD.name)
-        if 'inserter' not in self.seen.positions_m:
-            missing.append(contract.axis_state('inserter').name)
+        axes = ['inserter']
+        if self.p['backbone'] and self.count_publishers(contract.axis_state('backbone').name):
+            axes.append('backbone')   # a backbone stage is up: hear it before a run uses it
+        missing += [contract.axis_state(axis).name for axis in axes
+                    if axis not in self.seen.positions_m]
         return missing
 
     def planned_centreline(self):

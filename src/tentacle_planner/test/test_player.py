@@ -136,6 +136,22 @@ def test_a_run_will_not_start_where_it_does_not_begin():
     assert player.phase is Phase.IDLE
 
 
+def test_a_run_that_moves_the_backbone_will_not_start_without_its_position():
+    # A coiling run starts the backbone wherever it is, but commands it from its first step:
+    # without a reading from it, the run would pause at once ('no /backbone/state').
+    coiling = Schedule([Step(0.08, (0.0, 0.002, 0.0), backbone_m=0.08 - 0.0025 * k)
+                        for k in range(3)])
+    start, play = play_steps(coiling, ('inserter', 'backbone'))
+    assert start == {'inserter': 0.0}
+    player = Player(start, play)
+    seen = Seen(positions_m={'inserter': 0.0}, positions_at={'inserter': 0.0})
+    with pytest.raises(ValueError, match='no position from the backbone'):
+        player.start(0.0, seen)
+    assert player.phase is Phase.IDLE
+    seen.positions_m['backbone'], seen.positions_at['backbone'] = 0.08, 0.0
+    assert player.start(0.0, seen).targets_m == {'inserter': 0.08, 'backbone': 0.08}
+
+
 def test_pause_holds_the_field_and_sends_no_target_until_resumed():
     player, rig = started()
     held = {}
@@ -257,9 +273,10 @@ def test_a_run_needs_steps_and_can_start_once():
     with pytest.raises(ValueError, match='at least one step'):
         Player({}, [])
     player = Player({}, [PlayStep(1, 0.001, {'inserter': 0.001}, np.zeros(3))])
-    player.start(0.0, Seen())
+    seen = Seen(positions_m={'inserter': 0.0}, positions_at={'inserter': 0.0})
+    player.start(0.0, seen)
     with pytest.raises(ValueError, match='start a new run'):
-        player.start(1.0, Seen())
+        player.start(1.0, seen)
 
 
 def test_the_dwell_left_counts_down_from_the_arrival_and_is_none_otherwise():

@@ -263,11 +263,12 @@ def test_the_search_stops_once_a_round_gains_too_little(braided):
             calls.append((done, total))
     # Targets shrunk to 0.8 of the known plan's shape: out of reach, no start is exact.
     problem = Problem(model, STEPS_M, [t * 0.8 for t in targets], constraints)
-    every = optimise(problem, seed=0, starts=6, progress=progress)
+    every = optimise(problem, seed=0, starts=6, iterations=40, progress=progress)
     assert [c[0] for c in calls] == [1, 2, 3, 4, 5, 6]
     calls.clear()
     problem = Problem(model, STEPS_M, [t * 0.8 for t in targets], constraints)
-    early = optimise(problem, seed=0, starts=6, min_gain=1.0, progress=progress)
+    early = optimise(problem, seed=0, starts=6, iterations=40, min_gain=1.0,
+                     progress=progress)
     assert [c[0] for c in calls] == [1, 2, 3, 4]   # two rounds: no gain can be 100%
     assert early.objective >= every.objective      # the first two rounds' best, not more
 

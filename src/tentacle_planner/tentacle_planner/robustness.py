@@ -90,7 +90,7 @@ def report(problems, plan, error=None, rig=()):
     return rows
 
 
-def played_densely(rig, plan, steps, error=None):
+def played_densely(rig, plan, steps, error):
     """
     Return report's rows for on_the_rig's: the plan's every playback step, as the rig runs it.
 
@@ -100,8 +100,8 @@ def played_densely(rig, plan, steps, error=None):
 
     :param rig: on_the_rig(...)
     :param steps: the plan's dense playback Steps (their fields and inserted lengths)
-    :param error: step -> shape RMS (m); default the optimiser's (joints and tip, here 0:
-        the dense steps have no targets of their own)
+    :param error: step -> shape RMS (m), against the path (the dense steps are played
+        without targets of their own)
     """
     rows = []
     lengths = [s.inserted_m for s in steps]
@@ -113,7 +113,7 @@ def played_densely(rig, plan, steps, error=None):
                         problem.constraints, problem.fixed_directions, problem.start,
                         backbones_m=[s.backbone_m for s in steps], keep_off=problem.keep_off)
         played = dense.plan(dense.pack(plan.directions, fields * coils))
-        per_step = [s.shape_rms_m if error is None else error(s) for s in played.steps]
+        per_step = [error(s) for s in played.steps]
         rows.append((f'{name}, every playback step', per_step,
                      float(np.sqrt(np.mean(np.square(per_step)))),
                      dense.deepest_contact_m(played)))

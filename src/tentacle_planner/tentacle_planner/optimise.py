@@ -519,6 +519,16 @@ class Problem:
                                  self.keep_off.walls)) for s in plan.steps]
         return max(0.0, -float(np.nanmin(gaps)))
 
+    def rank(self, plan, error, flags=0):
+        """
+        Return (flags, how deep into a wall, error) of a plan: the lower, the better.
+
+        :param error: what decides between plans that are alike there (the objective, or
+            the re-checked shape error)
+        :param flags: flags the plan's own list does not carry (a re-check's)
+        """
+        return len(plan.flags) + flags, self.deepest_contact_m(plan), error
+
     def violations(self, directions, fields, tolerance=1e-6):
         """Return what breaks a constraint, one line each (relative tolerance)."""
         c, out = self.constraints, []
@@ -640,6 +650,11 @@ def leading(problem, *, keep=2, seed=0, starts=8, iterations=100, initial=None, 
     return [plan for _, _, plan in search.ranked[:keep]]
 
 
+def clean(rank):
+    """Return whether a plan of this Problem.rank has no flag and touches nothing."""
+    return rank[:2] == (0, 0.0)
+
+
 class _Search:
     """
     The best plan so far.
@@ -660,7 +675,7 @@ class _Search:
     @property
     def clean(self):
         """Return whether the best plan so far has no flag and touches nothing."""
-        return bool(self.ranked) and self.ranked[0][0][:2] == (0, 0.0)
+        return bool(self.ranked) and clean(self.ranked[0][0])
 
     @property
     def best_objective(self):
@@ -670,8 +685,7 @@ class _Search:
     def consider(self, x):
         """Take a fitted x as a candidate."""
         plan = self.problem.plan(x)
-        key = (len(plan.flags), self.problem.deepest_contact_m(plan), plan.objective)
-        self.ranked.append((key, self.done, plan))
+        self.ranked.append((self.problem.rank(plan, plan.objective), self.done, plan))
         self.ranked.sort(key=lambda entry: entry[:2])   # of equals, the earlier start
         self.done += 1
         if self.progress is not None:
@@ -702,6 +716,26 @@ def _quiet_worker():
     _WORKER_BLAS.append(threadpool_limits(limits=1, user_api='blas'))
 
 
+@contextlib.contextmanager
+def _forked(processes):
+    """
+    Yield a pool of processes forked from this one (None for none), all on one BLAS thread.
+
+    One BLAS thread here and in every worker, whatever the count: the matrices are small,
+    and two processes' BLAS threads contending for two cores made a round of two starts 1.5
+    times as long (pancreatic_duct); the same threads for any count keep the plans the same.
+    """
+    with threadpool_limits(limits=1, user_api='blas'):
+        pool = multiprocessing.get_context('fork').Pool(processes, _quiet_worker) \
+            if processes > 0 else None
+        try:
+            yield pool
+        finally:
+            if pool is not None:
+                pool.terminate()
+                pool.join()
+
+
 _SIDE_BY_SIDE = None   # the function side_by_side's forked workers call (set before the fork)
 
 
@@ -719,19 +753,15 @@ def side_by_side(function, items, workers):
     """
     global _SIDE_BY_SIDE
     items = list(items)
-    with threadpool_limits(limits=1, user_api='blas'):
-        if workers < 2 or len(items) < 2:
-            return [function(item) for item in items]
-        _SIDE_BY_SIDE = function
-        pool = multiprocessing.get_context('fork').Pool(min(workers, len(items)) - 1,
-                                                        _quiet_worker)
-        try:
+    _SIDE_BY_SIDE = function
+    try:
+        with _forked(min(workers, len(items)) - 1) as pool:
+            if pool is None:
+                return [function(item) for item in items]
             pending = [pool.apply_async(_call_in_worker, (item,)) for item in items[1:]]
             return [function(items[0])] + [result.get() for result in pending]
-        finally:
-            pool.terminate()
-            pool.join()
-            _SIDE_BY_SIDE = None
+    finally:
+        _SIDE_BY_SIDE = None
 
 
 class _Fitter:
@@ -781,21 +811,11 @@ class _Fitter:
     def workers(self, count):
         """Run submitted starts in count - 1 forked processes while inside (1: here)."""
         global _WORKER_FITTER
-        # One BLAS thread here and in every worker, whatever the count: the matrices are
-        # small, and two processes' BLAS threads contending for two cores made a round of
-        # two starts 1.5 times as long (pancreatic_duct); the same threads for any count
-        # keep the plans the same.
-        blas = threadpool_limits(limits=1, user_api='blas')
-        if count > 1:
-            _WORKER_FITTER = self
-            self.pool = multiprocessing.get_context('fork').Pool(count - 1, _quiet_worker)
+        _WORKER_FITTER = self   # before the fork: the workers fit with this one's problem
         try:
-            yield self
+            with _forked(count - 1) as self.pool:
+                yield self
         finally:
-            blas.restore_original_limits()
-            if self.pool is not None:
-                self.pool.terminate()
-                self.pool.join()
             self.pool, _WORKER_FITTER = None, None
 
     def submit(self, job):

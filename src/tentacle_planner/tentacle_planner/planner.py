@@ -18,8 +18,8 @@ from tentacle_model import statics
 from tentacle_model.chain import discretise
 from tentacle_planner import paths
 from tentacle_planner.clearance import clearance
-from tentacle_planner.optimise import (Constraints, KeepOff, leading, optimise, Plan, polish,
-                                       Problem, side_by_side)
+from tentacle_planner.optimise import (clean, Constraints, KeepOff, leading, optimise, Plan,
+                                       polish, Problem, side_by_side)
 from tentacle_planner.playback import playback
 from tentacle_planner.robustness import (on_the_rig, perturbed_problems, played_densely,
                                          report, RobustProblem)
@@ -198,7 +198,7 @@ def refine(scene, problem, plans, iterations, workers=1):
         refined += side_by_side(partial(_refined, scene, problem, finest, iterations),
                                 plans[first:first + REFINED], workers)
         sublinks, plan, checked, rank = min(refined, key=lambda entry: entry[3])
-        if rank[:2] == (0, 0.0):
+        if clean(rank):
             break
     if sublinks != problem.model.sublinks:
         problem = finer_problem(scene, problem, sublinks)
@@ -218,9 +218,8 @@ def _refined(scene, problem, finest, iterations, plan):
         x = polish(problem, x0, iterations)
         plan = problem.plan(x if _objective(problem, x) < _objective(problem, x0) else x0)
         checked = recheck(scene, plan)
-    rank = (len(plan.flags) + len(checked[1]), problem.deepest_contact_m(plan),
-            checked[0][-1][1])
-    return problem.model.sublinks, plan, checked, rank
+    return (problem.model.sublinks, plan, checked,
+            problem.rank(plan, checked[0][-1][1], flags=len(checked[1])))
 
 
 def _objective(problem, x):

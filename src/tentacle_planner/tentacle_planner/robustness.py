@@ -83,11 +83,16 @@ def report(problems, plan, error=None, rig=()):
     """
     rows = []
     for name, problem, coils in [(n, p, 1.0) for n, p in problems] + list(rig):
-        played = problem.plan(problem.pack(plan.directions, plan.fields_t * coils))
-        per_step = [s.shape_rms_m if error is None else error(s) for s in played.steps]
-        rows.append((name, per_step, float(np.sqrt(np.mean(np.square(per_step)))),
-                     problem.deepest_contact_m(played)))
+        rows.append(_row(name, problem, plan, plan.fields_t * coils, error))
     return rows
+
+
+def _row(name, problem, plan, fields_t, error):
+    """Return report's row of a plan's directions and these fields played in a problem."""
+    played = problem.plan(problem.pack(plan.directions, fields_t))
+    per_step = [s.shape_rms_m if error is None else error(s) for s in played.steps]
+    return (name, per_step, float(np.sqrt(np.mean(np.square(per_step)))),
+            problem.deepest_contact_m(played))
 
 
 def played_densely(rig, plan, steps, error):
@@ -112,11 +117,7 @@ def played_densely(rig, plan, steps, error):
                                          for length in lengths],
                         problem.constraints, problem.fixed_directions, problem.start,
                         backbones_m=[s.backbone_m for s in steps], keep_off=problem.keep_off)
-        played = dense.plan(dense.pack(plan.directions, fields * coils))
-        per_step = [error(s) for s in played.steps]
-        rows.append((f'{name}, every playback step', per_step,
-                     float(np.sqrt(np.mean(np.square(per_step)))),
-                     dense.deepest_contact_m(played)))
+        rows.append(_row(f'{name}, every playback step', dense, plan, fields * coils, error))
     return rows
 
 

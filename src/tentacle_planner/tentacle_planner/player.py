@@ -112,6 +112,12 @@ def play_steps(schedule, axes=('inserter',), insertion_offset_m=0.0, retract=Fal
     return home, steps
 
 
+def commanded_axes(schedule, axes=('inserter',)):
+    """Return the stages a run of a schedule commands, of axes: [axis] (play_steps')."""
+    start, steps = play_steps(schedule, axes)
+    return list(dict.fromkeys([*start, *(a for s in steps for a in s.targets_m)]))
+
+
 class Player:
     """One run of steps on the rig."""
 

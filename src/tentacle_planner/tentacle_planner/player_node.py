@@ -21,6 +21,7 @@ and /diagnostics. On exit a run still commanding is aborted: zero field, stages 
 """
 
 import math
+import os
 import sys
 import time
 
@@ -46,7 +47,8 @@ from tentacle_model.tentacle_spec import load_tentacle, SpecError
 from tentacle_planner import paths
 from tentacle_planner.errors import PlanInputError
 from tentacle_planner.loop_gate import LoopGate
-from tentacle_planner.player import Phase, play_steps, Player, Seen, Settings
+from tentacle_planner.player import (commanded_axes, Phase, play_steps, Player, Seen,
+                                     Settings)
 from tentacle_planner.player_params import (LOOP_PARAMS, MODES, NODE_NAME, PLAYER_PARAMS,
                                             REFERENCES)
 from tentacle_planner.schedule_check import CoilLimits, field_refusals, tentacle_refusals
@@ -100,6 +102,7 @@ class PlayerNode(Node):
         self._shape_raw, self._shape_points = None, None
         self._others = []
         self._phase = None
+        self._schedule_axes = (None, ['inserter'])   # ((file, mtime), axes): schedule_axes
 
         self.field_pub = publisher(self, contract.FIELD_CMD)
         self.target_pubs = {axis: publisher(self, contract.axis_target(axis))
@@ -213,12 +216,35 @@ class PlayerNode(Node):
             [f'the limits of {self.p["coils_node"]}']
         if self.seen.field_t is None:
             missing.append(contract.FIELD.name)
-        axes = ['inserter']
-        if self.p['backbone'] and self.count_publishers(contract.axis_state('backbone').name):
-            axes.append('backbone')   # a backbone stage is up: hear it before a run uses it
-        missing += [contract.axis_state(axis).name for axis in axes
+        missing += [contract.axis_state(axis).name for axis in self.schedule_axes()
                     if axis not in self.seen.positions_m]
         return missing
+
+    def axes(self):
+        """Return the stages this node may command: the backbone too where it is allowed."""
+        return ('inserter', 'backbone') if self.p['backbone'] else ('inserter',)
+
+    def schedule_axes(self):
+        """
+        Return the stages a run of the schedule set now would command (the inserter at least).
+
+        Read again only when the file or its modification time changes; a schedule that
+        cannot be read is said so when a run is started.
+        """
+        path = self.loop['schedule']
+        try:
+            key = (path, os.stat(path).st_mtime_ns) if path else None
+        except OSError:
+            key = None
+        if key is None:
+            return ['inserter']
+        if self._schedule_axes[0] != key:
+            try:
+                axes = commanded_axes(read_schedule(path), self.axes())
+            except PlanInputError:
+                axes = ['inserter']
+            self._schedule_axes = (key, axes)
+        return self._schedule_axes[1]
 
     def planned_centreline(self):
         """Return the step under way's planned centreline (k, 3), coils m, or None."""
@@ -264,8 +290,7 @@ class PlayerNode(Node):
             reasons.append('the plan was interrupted (Ctrl-C): plan it again to play it')
         if reasons:
             raise ValueError(f'refused {schedule.source}: ' + '; '.join(reasons))
-        axes = ('inserter', 'backbone') if self.p['backbone'] else ('inserter',)
-        start, steps = play_steps(schedule, axes, self.p['insertion_offset_m'], retract)
+        start, steps = play_steps(schedule, self.axes(), self.p['insertion_offset_m'], retract)
         q = self.p
         settings = Settings(
             dwell_s=q['dwell_s'], position_tolerance_m=q['position_tolerance'],

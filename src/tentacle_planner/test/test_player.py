@@ -4,7 +4,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pytest
-from tentacle_planner.player import Phase, play_steps, Player, PlayStep, Seen, Settings
+from tentacle_planner.player import (commanded_axes, Phase, play_steps, Player, PlayStep,
+                                     Seen, Settings)
 from tentacle_planner.schedule_check import CoilLimits
 from tentacle_planner.shape_control import in_limits
 
@@ -143,6 +144,9 @@ def test_a_run_that_moves_the_backbone_will_not_start_without_its_position():
                         for k in range(3)])
     start, play = play_steps(coiling, ('inserter', 'backbone'))
     assert start == {'inserter': 0.0}
+    assert commanded_axes(coiling, ('inserter', 'backbone')) == ['inserter', 'backbone']
+    assert commanded_axes(coiling) == commanded_axes(schedule(), ('inserter', 'backbone')) \
+        == ['inserter']   # the backbone not allowed, or no reach in the schedule
     player = Player(start, play)
     seen = Seen(positions_m={'inserter': 0.0}, positions_at={'inserter': 0.0})
     with pytest.raises(ValueError, match='no position from the backbone'):

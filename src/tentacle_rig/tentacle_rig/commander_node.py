@@ -433,10 +433,14 @@ class RigCommander(Node):
                               f'after {timeout_s:g} s')
             time.sleep(0.02)
 
-    def wait_for_player(self, timeout_s=30.0):
-        """Wait until player_node says it is ready (it knows the coils' limits) or runs."""
+    def wait_for_player(self, timeout_s=30.0, since=-math.inf):
+        """
+        Wait until player_node says it is ready (it knows the coils' limits) or runs.
+
+        :param since: only statuses received after this monotonic time count
+        """
         def ready():
-            state = self.run_state()
+            state = self.run_state(since)
             return state is not None and (state[0] != 'idle' or state[1] == 'ready')
         if wait_for(ready, timeout_s):
             return Result(Outcome.DONE, 'the player is ready')
@@ -453,6 +457,11 @@ class RigCommander(Node):
         values = dict(player_params, **({'schedule': str(schedule)} if schedule else {}))
         if values:
             result = self.set_player(**values)
+            if not result:
+                return result
+            # Ready for this schedule, said after it was set: the schedule may command a
+            # stage the player has not heard yet.
+            result = self.wait_for_player(min(timeout_s, 30.0), since=time.monotonic())
             if not result:
                 return result
         result = self.player('retract' if retract else 'start')

@@ -27,7 +27,7 @@ from collections import OrderedDict
 from dataclasses import dataclass, replace
 
 import numpy as np
-from tentacle_model import link_loads, planar, spatial, statics, torque_balance
+from tentacle_model import link_loads, planar, spatial, spatial_newton, statics, torque_balance
 from tentacle_model.chain import Chain, discretise
 
 DEFAULT_ITERATIONS = 200
@@ -85,6 +85,7 @@ class TentacleModel:
         self.tol, self.max_iterations = tol, max_iterations
         self._chains = OrderedDict()  # least recently used first
         self._last_evaluation = None  # (solution, field, _evaluate's result)
+        self._last_sensitivities = None  # (solution, field, _compiled's result)
         self.chain(spec.length_m)  # a bad knob is refused now, not at the first solve
 
     def chain(self, inserted_m, backbone_m=None):
@@ -166,21 +167,28 @@ class TentacleModel:
 
         :param state: (n, 3) joint angles at from_m
         """
-        old, new = self.chain(from_m), self.chain(to_m)
+        old = self.chain(from_m)
         state = np.asarray(state, dtype=float)
         if state.shape != (old.size, 3):
             raise ValueError(f'state of shape {state.shape} is not of {old.size} links at '
                              f'{from_m:g} m inserted')
-        out = np.zeros((new.size, 3))
-        if old.size == 0 or new.size == 0:
-            return out
-        tolerance = 1e-9 * self.spec.length_m
-        index = np.searchsorted(old.s_start_m, new.s_start_m)
-        index = np.clip(index, 0, old.size - 1)
-        same = np.abs(old.s_start_m[index] - new.s_start_m) <= tolerance
-        out[same] = state[index[same]]
-        out[0] = state[0]
+        index = self.carry_index(from_m, to_m)
+        out = np.zeros((len(index), 3))
+        out[index >= 0] = state[index[index >= 0]]
         return out
+
+    def carry_index(self, from_m, to_m):
+        """Return (n_to,): the joint at from_m whose angles each joint at to_m takes, or -1."""
+        old, new = self.chain(from_m), self.chain(to_m)
+        index = np.full(new.size, -1)
+        if old.size == 0 or new.size == 0:
+            return index
+        tolerance = 1e-9 * self.spec.length_m
+        nearest = np.clip(np.searchsorted(old.s_start_m, new.s_start_m), 0, old.size - 1)
+        same = np.abs(old.s_start_m[nearest] - new.s_start_m) <= tolerance
+        index[same] = nearest[same]
+        index[0] = 0   # the clamp joint keeps its bend
+        return index
 
     def stability(self, solution, field_t):
         """
@@ -230,6 +238,8 @@ class TentacleModel:
         :param field_t: (3,) the field of the solve, tesla
         :raises numpy.linalg.LinAlgError: the Hessian is singular (no isolated equilibrium)
         """
+        if self._compiled_sensitivities:
+            return self._compiled(solution, field_t)[0]
         chain, state, free, hessian = self._evaluate(solution, field_t)
         dg_db = -spatial.cross(state.axes, state.distal_moments[:, None, :]).reshape(-1, 3)
         return self._implicit(chain, state, free, hessian, dg_db)
@@ -246,10 +256,34 @@ class TentacleModel:
         """
         if self.dipoles:
             raise ValueError('moment sensitivity is not available with dipoles=True')
+        if self._compiled_sensitivities:
+            return self._compiled(solution, field_t)[1]
         chain, state, free, hessian = self._evaluate(solution, field_t)
         n = chain.size
         d_moment = torque_balance.residual_3dof(chain, solution.state, field_t)[2]
         return self._implicit(chain, state, free, hessian, -d_moment.reshape(3 * n, 3 * n))
+
+    @property
+    def _compiled_sensitivities(self):
+        """Return whether both sensitivities come from one compiled pass (3-DoF, no dipoles)."""
+        return self.dof == 3 and not self.dipoles
+
+    def _compiled(self, solution, field_t):
+        """Return (field, moment) Sensitivities of a 3-DoF solution, the last pair kept."""
+        # The planner asks for both of every solution in turn: one factorisation serves both.
+        field = np.asarray(field_t, dtype=float)
+        last = self._last_sensitivities
+        if last is not None and last[0] is solution and np.array_equal(last[1], field):
+            return last[2]
+        state = self._evaluate(solution, field)[1]
+        dq_field, dq_moment, dp_field, dp_moment = spatial_newton.sensitivities(
+            state.rotations, state.axes, state.points_m, state.distal_moments, state.hessian,
+            field)
+        n = solution.chain.size
+        result = (Sensitivity(dq_field.reshape(n, 3, 3), dp_field, state.hessian),
+                  Sensitivity(dq_moment.reshape(n, 3, 3 * n), dp_moment, state.hessian))
+        self._last_sensitivities = (solution, field.copy(), result)
+        return result
 
     def _implicit(self, chain, state, free, hessian, dg_dp):
         """Return the Sensitivity from dg/dp (3n, p) by H dq = -(dg/dp) dp."""

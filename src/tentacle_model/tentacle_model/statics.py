@@ -13,11 +13,14 @@ unstable or at a bifurcation). It never returns NaN silently.
 Two joint models share the minimiser: planar 1-DoF joints (planar.py, O(n) per step with
 a tridiagonal Hessian) and 3-DoF bend-bend-twist joints (spatial.py, dense Hessian); each
 has a linearised (small-angle) form, and either can add the magnets' interaction
-(dipoles.py), which couples every link with every other (a dense Hessian).
+(dipoles.py), which couples every link with every other (a dense Hessian). The 3-DoF model
+without the interaction runs the same minimiser compiled (spatial_newton.py): a 5-link solve
+in tens of microseconds rather than 0.3 ms of Python calls.
 
 A problem too large to answer within the time limit is refused before any work
 (check_size: MAX_LINKS per joint model, MAX_ESTIMATED_BYTES of dense arrays), and the time
-limit is checked before every Newton step and line-search trial.
+limit is checked before every Newton step and line-search trial (the compiled minimiser's:
+before every call of a few steps, one from 174 angles up).
 """
 
 import contextlib
@@ -27,7 +30,7 @@ import time
 import numpy as np
 from scipy.linalg import eigh, eigh_tridiagonal, LinAlgError, solveh_banded
 from scipy.linalg.lapack import dpotrf as potrf, dpotrs as potrs, dptsv as ptsv
-from tentacle_model import link_loads, planar, spatial
+from tentacle_model import link_loads, planar, spatial, spatial_newton
 from tentacle_model.chain import Chain, MAX_CHAIN_LINKS, ProblemTooLarge
 from tentacle_model.dipoles import Contact
 from threadpoolctl import ThreadpoolController
@@ -42,6 +45,9 @@ At 0.3 rad sin x = x within 1.5 % and cos x = 1 within 4.5 %; the linearised kin
 lengthen such a link by 4.4 % (sqrt(1 + x^2)). Past it small_angle_violation says so.
 """
 ESCAPE_STEP_RAD = 0.05
+COMPILED_STEP_WORK = 30_000
+"""The compiled Newton's steps a call, times the problem's size squared: the deadline is
+checked between calls (16 steps a call for a 15-angle chain, one from 174 angles up)."""
 # Dense Hessians of these sizes are factorised on one BLAS thread: measured here, with the
 # other core busy a 150 x 150 Cholesky took 0.12 ms on one thread and 0.8 ms on two (the
 # hand-off costs more than the arithmetic); past the upper size the threads pay for
@@ -293,6 +299,11 @@ def compile_kernels():
     planar.smallest_eigenvalue(one, np.zeros(0))
     chain = Chain(one, np.ones((1, 3)), np.ones((1, 3)), one, one, np.zeros(3), np.eye(3))
     spatial.evaluate(chain, np.zeros((1, 3)), np.zeros(3))
+    minimiser = _Spatial(chain, np.zeros(3), np.zeros(3))
+    _minimise_compiled(minimiser, np.zeros(3), 1e-9, 1, np.inf, np.inf)
+    evaluation = spatial.evaluate(chain, np.zeros((1, 3)), np.zeros(3))
+    spatial_newton.sensitivities(evaluation.rotations, evaluation.axes, evaluation.points_m,
+                                 evaluation.distal_moments, evaluation.hessian, np.zeros(3))
     _COMPILED.append(True)
 
 
@@ -424,6 +435,39 @@ def _minimise(problem, x, tol, max_iterations, time_limit_s, deadline):
         x = trial
 
 
+def _minimise_compiled(problem, x, tol, max_iterations, time_limit_s, deadline):
+    """
+    Return _minimise's result for a 3-DoF chain without link loads, by the compiled Newton.
+
+    The same steps (spatial_newton.minimise), run in calls of COMPILED_STEP_WORK / size^2
+    Newton steps (at least one) with the deadline checked before each call (none past it):
+    a call is well under a millisecond at any size a call holds more than one step.
+    """
+    chain = problem.chain
+    steps = max(1, COMPILED_STEP_WORK // problem.size ** 2)
+    iterations = escapes = 0
+    while True:
+        x, status, iterations, escapes, residual, stability = spatial_newton.minimise(
+            x, chain.base_rotation, chain.base_position_m, chain.lengths_m,
+            np.ascontiguousarray(chain.moments_a_m2, dtype=float), problem.levers,
+            chain.stiffness_n_m, problem.field, problem.gravity, tol, problem.k_floor,
+            max_iterations, iterations, escapes, 0 if time.monotonic() > deadline else steps,
+            MAX_STEP_RAD, MAX_SADDLE_ESCAPES, ESCAPE_STEP_RAD)
+        if status != spatial_newton.RUNNING:
+            break
+        if time.monotonic() > deadline:
+            return x, f'no convergence within the {time_limit_s:g} s limit', iterations, \
+                residual, None
+    if status == spatial_newton.CONVERGED:
+        return x, 'converged' + (f' after leaving {escapes} saddle(s)' if escapes else ''), \
+            iterations, residual, float(stability)
+    reason = {spatial_newton.NON_FINITE: 'non-finite gradient',
+              spatial_newton.OUT_OF_ITERATIONS: f'no convergence in {max_iterations} iterations',
+              spatial_newton.AT_ROUND_OFF: 'converged (at round-off)',
+              spatial_newton.LINE_SEARCH_FAILED: f'line search failed (residual {residual:.3g})'}
+    return x, reason[status], iterations, residual, None
+
+
 def solve(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=1, initial=None, tol=1e-9,
           max_iterations=500, time_limit_s=10.0, linear=False, dipoles=False):
     """
@@ -501,7 +545,9 @@ def _solve(problem, x, shape, tol, max_iterations, time_limit_s, deadline):
             return Equilibrium(np.full(shape, np.nan), np.full(points_shape, np.nan), False,
                                'linearised model has no minimum (Hessian not positive '
                                'definite)', 0, np.nan, lowest, np.nan)
-    x, reason, iterations, residual, stability = _minimise(problem, x, tol, max_iterations,
+    minimiser = _minimise_compiled if isinstance(problem, _Spatial) and not problem.loads \
+        else _minimise
+    x, reason, iterations, residual, stability = minimiser(problem, x, tol, max_iterations,
                                                            time_limit_s, deadline)
     if not np.all(np.isfinite(x)):
         return Equilibrium(np.full(shape, np.nan), np.full(points_shape, np.nan), False,

@@ -124,6 +124,11 @@ def contact_flags(scene, steps):
     return flags
 
 
+def deepest_contact_m(scene, steps):
+    """Return how far the body of any Step runs into the scene's obstacles and walls, m."""
+    return max([0.0] + [-step_clearance(scene, step)[0] for step in steps])
+
+
 def least_contact_flag(scene, steps):
     """Return [a flag] where any step's body touches: the deepest contact, the least found."""
     gaps = [step_clearance(scene, step) + (step.inserted_m,) for step in steps]
@@ -169,11 +174,11 @@ def refinements(planning, finest):
     return out
 
 
-def refine(scene, problem, plans, iterations, workers=1):
+def refined(scene, problem, plans, iterations, workers=1):
     """
-    Return (problem, plan, re-check): of plans, the best re-checked, each refined first.
+    Yield (problem, plan, re-check) of plans refined, the best re-checked first.
 
-    The re-check is recheck(scene, plan) of the plan returned. Refined: a model is confirmed
+    The re-check is recheck(scene, plan) of the plan yielded. Refined: a model is confirmed
     when the plan re-checked at higher fidelity is no worse than in that model by more than
     REFINE_TOLERANCE of its error (and 0.1% of L); otherwise the plan is polished with twice
     the sub-links (then twice again, up to the re-check's), kept where it fits that model
@@ -184,29 +189,33 @@ def refine(scene, problem, plans, iterations, workers=1):
     Plans are refined REFINED at a time, side by side in up to workers processes, best
     first, until one is without flags and clear of every wall (an exact fit in the planning
     model may run into a wall in the finer one). Of those refined, the one without flags,
-    running least deep into a wall and then of least re-checked error wins: the search's
-    best in the planning model is not always the best re-checked (ch3_b: 0.69 mm against
-    0.13 mm).
+    running least deep into a wall and then of least re-checked error comes first: the
+    search's best in the planning model is not always the best re-checked (ch3_b: 0.69 mm
+    against 0.13 mm). Asked for another (its dense playback touched), the next refined, or
+    the next plans refined.
     """
     finest = higher_fidelity_sublinks(scene)
     if finest is None or not problem.free_segments:
         # Fields alone (a given magnetisation, ch6_coiling): not yet; the coiling strip's
         # finer model takes 8 times as long to simulate (27 ms a solve for sim_node).
-        return problem, plans[0], None
-    refined = []
-    for first in range(0, len(plans), REFINED):   # until one is clean
-        refined += side_by_side(partial(_refined, scene, problem, finest, iterations),
-                                plans[first:first + REFINED], workers)
-        sublinks, plan, checked, rank = min(refined, key=lambda entry: entry[3])
-        if clean(rank):
-            break
-    if sublinks != problem.model.sublinks:
-        problem = finer_problem(scene, problem, sublinks)
-    return problem, plan, checked
+        for plan in plans:
+            yield problem, plan, None
+        return
+    done, pending = [], list(plans)
+    while done or pending:
+        if pending and not any(clean(entry[3]) for entry in done):   # refine more
+            done += side_by_side(partial(_refined, scene, problem, finest, iterations),
+                                 pending[:REFINED], workers)
+            pending = pending[REFINED:]
+            continue
+        sublinks, plan, checked, _ = done.pop(min(range(len(done)),
+                                                  key=lambda i: done[i][3]))
+        yield (problem if sublinks == problem.model.sublinks else
+               finer_problem(scene, problem, sublinks)), plan, checked
 
 
 def _refined(scene, problem, finest, iterations, plan):
-    """Return (sub-links, plan, re-check, rank) of one plan refined as refine says."""
+    """Return (sub-links, plan, re-check, rank) of one plan refined as refined() says."""
     checked = recheck(scene, plan)
     for sublinks in refinements(problem.model.sublinks, finest):
         planned, rechecked = shape_rms(scene, plan.steps), checked[0][-1][1]
@@ -330,8 +339,43 @@ def _after_search(scene, problem, found, seed, iterations, robust, report_progre
         skipped.append(what)
         return otherwise
 
-    problem, nominal, checked = phase('the polish in the finer model', lambda: refine(
-        scene, problem, found, iterations, workers), (problem, nominal, None))
+    def dense_playback(problem, plan):
+        """Return (steps, flags) of a plan played every playback step in problem's model."""
+        steps, dense_flags = playback(
+            problem.model, plan, lambda chain, inserted: paths.targets(scene.path, chain,
+                                                                       inserted),
+            scene.playback_step_m, problem.constraints, progress=report_progress('playback'),
+            keep_off=problem.keep_off)
+        key = {round(s.inserted_m, 12) for s in plan.steps}
+        return steps, dense_flags + contact_flags(
+            scene, [s for s in steps if round(s.inserted_m, 12) not in key])
+
+    candidates = refined(scene, problem, found, iterations, workers)
+    problem, nominal, checked = phase('the polish in the finer model',
+                                      lambda: next(candidates), (problem, nominal, None))
+    played = None   # the nominal plan's (dense steps, flags), once played
+    if scene.playback_step_m and not robust:
+        def played_clear():
+            """
+            Return the first refined plan whose playback keeps off, flagless, with it.
+
+            Or else the one whose body runs least deep into a wall: a plan clear at its key
+            steps may touch between them (bile_duct: 0.91 mm at 12 mm, once).
+            """
+            entry, best = (problem, nominal, checked), None
+            while entry is not None:
+                dense = dense_playback(*entry[:2])
+                order = (deepest_contact_m(scene, list(entry[1].steps) + dense[0]),
+                         len(dense[1]))
+                if best is None or order < best[0]:
+                    best = order, entry + (dense,)
+                if not dense[1]:
+                    break
+                entry = next(candidates, None)
+            return best[1]
+        problem, nominal, checked, played = phase(
+            'dense playback (key steps only)', played_clear,
+            (problem, nominal, checked, ([], [])))
     problems = phase('the robustness report', lambda: perturbed_problems(problem), [])
     rig = on_the_rig(problem, scene.mismatch)
     robust_plan, robust_rows = None, []
@@ -348,19 +392,11 @@ def _after_search(scene, problem, found, seed, iterations, robust, report_progre
                                 lambda: report(problems, robust_plan, error, rig), [])
     plan = robust_plan or nominal
     flags = list(plan.flags) + contact_flags(scene, plan.steps)
-    dense = []
-    if scene.playback_step_m:
-        def dense_playback():
-            steps, dense_flags = playback(
-                problem.model, plan, lambda chain, inserted: paths.targets(scene.path, chain,
-                                                                           inserted),
-                scene.playback_step_m, problem.constraints, progress=report_progress(
-                    'playback'), keep_off=problem.keep_off)
-            key = {round(s.inserted_m, 12) for s in plan.steps}
-            return steps, dense_flags + contact_flags(
-                scene, [s for s in steps if round(s.inserted_m, 12) not in key])
-        dense, dense_flags = phase('dense playback (key steps only)', dense_playback, ([], []))
-        flags += dense_flags
+    if scene.playback_step_m and played is None:
+        played = phase('dense playback (key steps only)',
+                       lambda: dense_playback(problem, plan), ([], []))
+    dense, dense_flags = played or ([], [])
+    flags += dense_flags
     flags = least_contact_flag(scene, list(plan.steps) + dense) + flags
     robustness = phase('the robustness report', lambda: report(problems, nominal, error, rig),
                        [])

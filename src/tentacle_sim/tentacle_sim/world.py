@@ -43,7 +43,7 @@ def made_to_plan(scene, schedule):
 
     Its planned magnetisation in place of the tentacle file's, simulated with as many
     sub-links per segment as the plan was made in (the planner may polish a plan finer than
-    the scene's model: planner.refine).
+    the scene's model: planner.refined).
 
     :param schedule: a schedule_file.Schedule
     """

@@ -14,7 +14,10 @@ field and every link's moment at once: one factorisation of the Hessian, one pas
 
 import numba
 import numpy as np
+from tentacle_model import compiled_cache, spatial
 from tentacle_model.spatial import _evaluate
+
+compiled_cache.fresh(__file__, spatial)
 
 RUNNING, CONVERGED, NON_FINITE, OUT_OF_ITERATIONS, LINE_SEARCH_FAILED, AT_ROUND_OFF = range(6)
 
@@ -71,16 +74,16 @@ def minimise(x, base_rotation, base_position, lengths, moments, levers, stiffnes
         if not np.isfinite(residual):
             return x, NON_FINITE, iterations, escapes, residual, np.nan
         if residual <= tol:
-            values, vectors = np.linalg.eigh(h)
+            lowest = np.linalg.eigvalsh(h)[0]   # half the time of the vectors too
             diag_scale = np.max(np.abs(np.diag(h)))
-            if values[0] < -1e-9 * diag_scale and escapes < max_escapes:
+            if lowest < -1e-9 * diag_scale and escapes < max_escapes:
                 escapes += 1
-                mode = vectors[:, 0]
+                mode = np.linalg.eigh(h)[1][:, 0]
                 total = mode.sum()
                 sign = 1.0 if total == 0.0 else np.sign(total)
                 x = x + escape_step_rad * sign * mode / np.max(np.abs(mode))
                 continue
-            return x, CONVERGED, iterations, escapes, residual, values[0]
+            return x, CONVERGED, iterations, escapes, residual, lowest
         if iterations >= max_iterations:
             return x, OUT_OF_ITERATIONS, iterations, escapes, residual, np.nan
         if done >= steps:

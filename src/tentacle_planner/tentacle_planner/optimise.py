@@ -32,7 +32,10 @@ import signal
 
 import numpy as np
 from scipy.optimize import least_squares, minimize
-from tentacle_planner.clearance import link_gap_gradients, link_gaps
+from tentacle_model import spatial, statics
+from tentacle_planner import step_residuals
+from tentacle_planner.clearance import gap_arrays, link_gap_gradients, link_gaps
+from tentacle_planner.step_residuals import FAILED_RESIDUAL
 from threadpoolctl import threadpool_limits
 
 MILLITESLA = 1e-3  # field unknowns are in mT: of the order of the angles, for the optimiser
@@ -163,10 +166,46 @@ class Problem:
                                     for i in model.chain(s).segment_index])
                        for s in self.steps_m}
         self.neighbour_weight = NEIGHBOUR_WEIGHTS[-1]
+        # the compiled key step (step_residuals) where the model allows: 3-DoF, no dipoles
+        self._steps = self._step_arrays() if model.dof == 3 and not model.dipoles else None
         # (lower (3,), upper (3,)) each axis of every step's field, T, within the limits: what
         # the rig can reach from the step before (dense playback); 3-axis fields only
         self.field_box_t = None
         self.evaluations = 0
+
+    def _step_arrays(self):
+        """Return each key step's fixed arguments of step_residuals, and what the call needs."""
+        model, off = self.model, self.keep_off
+        obstacles = gap_arrays(*((off.spheres, off.walls) if off else ((), ())))
+        keep = (off.margin_m, off.weight / (self.length_m * math.sqrt(len(self.steps_m)))) \
+            if off else (0.0, 0.0)
+        newton = np.array([statics.MAX_STEP_RAD, statics.MAX_SADDLE_ESCAPES,
+                           statics.ESCAPE_STEP_RAD])
+        previous = None if self.start is None else self.start[1]
+        out = []
+        for inserted_m, backbone_m, target in zip(self.steps_m, self.backbones_m, self.targets):
+            chain = model.chain(inserted_m, backbone_m)
+            carry = np.full(chain.size, -1) if previous is None else model.carry_index(
+                previous, inserted_m)
+            weight = 1.0 / (self.length_m * math.sqrt(len(self.steps_m) * len(target)))
+            out.append((carry, (
+                chain.base_rotation, chain.base_position_m, chain.lengths_m,
+                self._magnitudes[inserted_m], chain.segment_index), (
+                spatial.gravity_levers(chain), chain.stiffness_n_m), (
+                model.gravity_m_s2, model.tol,
+                max(1e-9 * np.max(chain.stiffness_n_m), 1e-300), model.max_iterations, newton,
+                target, weight, self._radii[inserted_m], *obstacles, *keep),
+                float(np.min(chain.stiffness_n_m))))
+            previous = inserted_m
+        first = np.full(len(model.spec.segments), -1)
+        first[self.free_segments] = np.arange(len(self.free_segments)) * \
+            self.angles_per_segment
+        field_map = (self.base_plane if self.field_size == 2 else np.eye(3)) * MILLITESLA
+        columns = len(obstacles[1]) + len(obstacles[3])
+        offsets = np.cumsum([0] + [(len(carry) + 1) * 3 + 1 + len(carry) * columns
+                                   for carry, *_ in out])
+        self._columns = first, field_map, offsets
+        return out
 
     # -- unknowns ---------------------------------------------------------------------------
     @property
@@ -238,6 +277,8 @@ class Problem:
             sensitivity leaves the interaction out): plan without them, verify with them
         """
         self.evaluations += 1
+        if self._steps is not None:
+            return self._compiled_residuals(x, jacobian)
         directions, fields = self.unpack(x)
         n_dir = len(self.free_segments) * self.angles_per_segment
         if jacobian and n_dir and self.model.dipoles:
@@ -250,11 +291,12 @@ class Problem:
             keep_off = self._keep_off_rows(k, solution)
             jac = np.zeros((target.size + 1 + len(keep_off[0]), self.size))
             if not solution.equilibrium.converged or not np.all(np.isfinite(solution.points_m)):
-                rows.append(np.concatenate([np.full(target.size + 1, 10.0),
+                rows.append(np.concatenate([np.full(target.size + 1, FAILED_RESIDUAL),
                                             np.zeros(len(keep_off[0]))]))
                 jacobians.append(jac)   # outside what the rig can rely on
                 continue
-            penalty, d_penalty = self._stability_penalty(k, solution, field_t, x, jacobian)
+            penalty, d_penalty = self._stability_penalty(
+                k, solution.state, self.margin(solution, field_t), x, jacobian)
             rows.append(np.concatenate([weight * (solution.points_m - target).reshape(-1),
                                         [penalty], keep_off[0]]))
             if not jacobian:
@@ -279,6 +321,46 @@ class Problem:
         rows.append(neighbours)
         jacobians.append(d_neighbours)
         return np.concatenate(rows), np.vstack(jacobians) if jacobian else None
+
+    def _compiled_residuals(self, x, jacobian):
+        """Return residuals' (r, J) by the compiled key step (step_residuals.py)."""
+        directions, fields = self.unpack(x)
+        n_dir = len(self.free_segments) * self.angles_per_segment
+        derivatives = np.zeros((len(directions), self.angles_per_segment, 3))
+        azimuths = x[:n_dir:self.angles_per_segment]
+        elevations = x[1:n_dir:2] if self.angles_per_segment == 2 else np.zeros(len(azimuths))
+        ca, sa, ce, se = np.cos(azimuths), np.sin(azimuths), np.cos(elevations), \
+            np.sin(elevations)
+        derivatives[self.free_segments, 0] = np.column_stack([-ce * sa, ce * ca, 0 * ca])
+        if self.angles_per_segment == 2:
+            derivatives[self.free_segments, 1] = np.column_stack([-se * ca, -se * sa, ce])
+        first, field_map, offsets = self._columns
+        neighbours, d_neighbours = self._neighbour_rows(x, directions)
+        r = np.zeros(offsets[-1] + len(neighbours))
+        jac = np.zeros((len(r), self.size) if jacobian else (0, 0))
+        state = None if self.start is None else np.asarray(self.start[0], dtype=float)
+        for k, (carry, chain, stiff, rest, least_stiffness) in enumerate(self._steps):
+            rows = slice(offsets[k], offsets[k + 1])
+            state, usable, stability = step_residuals.step_residuals(
+                step_residuals.carried(state, carry) if state is not None else
+                np.zeros((len(carry), 3)), *chain, directions, *stiff, fields[k], *rest,
+                derivatives, first, n_dir, field_map, self._field_slice(k).start, r[rows],
+                jac[rows] if jacobian else jac, jacobian)
+            if usable:   # the stability penalty's row: after the shape's
+                row = offsets[k] + 3 * (len(carry) + 1)
+                r[row], d_penalty = self._stability_penalty(
+                    k, state, stability / least_stiffness, x, jacobian)
+                if jacobian:
+                    jac[row] = d_penalty
+        r[offsets[-1]:] = neighbours
+        if jacobian:
+            jac[offsets[-1]:] = d_neighbours
+        return r, jac if jacobian else None
+
+    def _field_slice(self, k):
+        """Return the columns of step k's field unknowns."""
+        start = len(self.free_segments) * self.angles_per_segment + k * self.field_size
+        return slice(start, start + self.field_size)
 
     def _neighbour_pairs(self):
         """Return the neighbouring magnetised segments (a, b) with a direction unknown."""
@@ -350,31 +432,27 @@ class Problem:
         # Straight and unloaded, the Hessian is the joint stiffness, diagonal.
         return stability / float(np.min(solution.chain.stiffness_n_m))
 
-    def _stability_penalty(self, k, solution, field_t, x, jacobian):
+    def _stability_penalty(self, k, state, margin, x, jacobian):
         """
         Return (penalty, d penalty / dx) of step k: STABILITY_WEIGHT (1 - margin / min_margin).
 
         Zero at margins of min_margin and more. The derivative is a forward difference of the
         margin, each unknown of the step (its field, the directions) moved in turn and the
-        step re-solved from its equilibrium: only where the penalty applies.
+        step re-solved from its equilibrium (state): only where the penalty applies.
         """
         d_penalty = np.zeros(self.size)
-        if not self.min_margin:
-            return 0.0, d_penalty
-        inserted_m = solution.inserted_m
-        margin = self.margin(solution, field_t)
-        if margin >= self.min_margin:
+        if not self.min_margin or margin >= self.min_margin:
             return 0.0, d_penalty
         penalty = STABILITY_WEIGHT * (1.0 - margin / self.min_margin)
         if not jacobian:
             return penalty, d_penalty
         n_dir = len(self.free_segments) * self.angles_per_segment
-        own = range(n_dir + k * self.field_size, n_dir + (k + 1) * self.field_size)
-        for j in [*range(n_dir), *own]:
+        inserted_m = self.steps_m[k]
+        for j in [*range(n_dir), *range(self.size)[self._field_slice(k)]]:
             moved = x.copy()
             moved[j] += MARGIN_STEP
             directions, fields = self.unpack(moved)
-            other = self.model.solve(inserted_m, fields[k], solution.state,
+            other = self.model.solve(inserted_m, fields[k], state,
                                      self._moments(directions, inserted_m),
                                      self.backbones_m[k])
             if other.equilibrium.converged:
@@ -840,7 +918,9 @@ def polish(problem, x0, iterations):
     of good shapes; SLSQP then keeps it exactly. Straight from a start far past the limit,
     SLSQP often ended in a poor plan (pancreatic_duct: 0.8% of L became 13%).
     """
-    if problem.constraints.max_neighbour_angle_rad is not None and problem.free_segments:
+    within = not np.any(problem._neighbour_rows(x0, problem.unpack(x0)[0])[0])
+    if problem.constraints.max_neighbour_angle_rad is not None and problem.free_segments \
+            and not within:
         for weight in NEIGHBOUR_WEIGHTS[:-1]:
             problem.neighbour_weight = weight
             try:

@@ -300,3 +300,40 @@ def test_side_by_side_gives_what_one_process_gives_in_order():
     alone = side_by_side(work, range(5), workers=1)
     assert [k for k, _ in alone] == [0, 1, 2, 3, 4]
     assert side_by_side(work, range(5), workers=2) == alone
+
+
+def test_the_compiled_key_step_gives_the_generic_residuals(braided):
+    # A 3-DoF model without dipoles runs each key step compiled (step_residuals.py): the
+    # residuals and Jacobian of the generic per-step path, through walls and a ball,
+    # non-converged steps, a start state and held directions.
+    from tentacle_planner.planner import problem_of
+    from tentacle_planner.scene import load_scene
+    scene = load_scene(ROOT / 'config' / 'scenes' / 'pancreatic_duct.yaml')
+    duct = problem_of(scene)
+    model = TentacleModel(braided, dof=3, sublinks=2, max_iterations=4)   # some fail
+    targets = [model.chain(s).base_position_m + np.zeros((model.chain(s).size + 1, 3))
+               for s in STEPS_M[1:]]
+    ball = KeepOff(spheres=(Sphere(np.array([0.03, 0.004, 0.0]), 0.002),), margin_m=0.001)
+    start = (np.full((model.chain(STEPS_M[0]).size, 3), 0.1), STEPS_M[0])
+    held = Problem(model, STEPS_M[1:], targets, Constraints(max_neighbour_angle_rad=0.5),
+                   directions=np.tile([0.0, 1.0, 0.0], (5, 1)), start=start, free=[3, 4],
+                   keep_off=ball)
+    rng = np.random.default_rng(11)
+    failed = 0
+    for problem in (duct, held):
+        assert problem._steps is not None   # the compiled path is the one in use
+        n_dir = len(problem.free_segments) * problem.angles_per_segment
+        for _ in range(12):
+            x = np.concatenate([rng.uniform(-math.pi, math.pi, n_dir),
+                                rng.uniform(-15.0, 15.0, problem.size - n_dir)])
+            r, jac = problem.residuals(x)
+            steps, problem._steps = problem._steps, None   # the generic path
+            try:
+                generic_r, generic_jac = problem.residuals(x)
+            finally:
+                problem._steps = steps
+            np.testing.assert_allclose(r, generic_r, rtol=1e-12, atol=1e-15)
+            np.testing.assert_allclose(jac, generic_jac, rtol=1e-9,
+                                       atol=1e-12 * np.abs(generic_jac).max())
+            failed += np.count_nonzero(r == 10.0) > 0
+    assert failed   # some steps did not converge: their rows are the generic ones too

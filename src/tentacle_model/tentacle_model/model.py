@@ -200,7 +200,7 @@ class TentacleModel:
         """
         return float(np.linalg.eigvalsh(self._evaluate(solution, field_t)[1].hessian)[0])
 
-    def _free(self, n):
+    def free_angles(self, n):
         """Return the indices of the model's free angles in the flattened (3n,) state."""
         every = np.arange(3 * n)
         return every if self.dof == 3 else every[0::3]
@@ -216,7 +216,7 @@ class TentacleModel:
         chain = solution.chain
         state = spatial.evaluate(chain, solution.state, field, self.gravity_m_s2, True, None,
                                  link_loads.of_chain(chain, self.dipoles))
-        free = self._free(chain.size)
+        free = self.free_angles(chain.size)
         result = chain, state, free, state.hessian[np.ix_(free, free)]
         self._last_evaluation = (solution, field.copy(), result)
         return result
@@ -278,7 +278,7 @@ class TentacleModel:
         state = self._evaluate(solution, field)[1]
         dq_field, dq_moment, dp_field, dp_moment = spatial_newton.sensitivities(
             state.rotations, state.axes, state.points_m, state.distal_moments, state.hessian,
-            field)
+            field, np.arange(3 * solution.chain.size))
         n = solution.chain.size
         result = (Sensitivity(dq_field.reshape(n, 3, 3), dp_field, state.hessian),
                   Sensitivity(dq_moment.reshape(n, 3, 3 * n), dp_moment, state.hessian))

@@ -119,35 +119,43 @@ def minimise(x, base_rotation, base_position, lengths, moments, levers, stiffnes
 
 
 @numba.njit(cache=True)
-def sensitivities(rotations, axes, points, distal_moments, hessian, field):
+def sensitivities(rotations, axes, points, distal_moments, hessian, field, free):
     """
     Return an equilibrium's derivatives by the field and by each link's moment.
 
-    From spatial._evaluate's pass at the equilibrium: (dq/dB (3n, 3) rad/T, dq/dm (3n, 3n)
-    rad per A m^2, dp/dB (n + 1, 3, 3) m/T, dp/dm (n + 1, 3, 3n)); m is each link's moment
-    in its own frame, columns (link, component). H dq = -(dg/dp) dp at the equilibrium, with
-    dg/dB = -(a_e x V_J(e)) and dg/dm_i = -R_i^T (B x a_e) for links i >= J(e).
+    From spatial._evaluate's pass at the equilibrium, in the free angles (indices into the
+    flattened (3n,) joint angles: all of them for 3-DoF joints, every third, bend_1, for
+    planar ones): (dq/dB (N, 3) rad/T, dq/dm (N, 3n) rad per A m^2, dp/dB (n + 1, 3, 3)
+    m/T, dp/dm (n + 1, 3, 3n)); m is each link's moment in its own frame, columns (link,
+    component). H dq = -(dg/dp) dp at the equilibrium, with dg/dB = -(a_e x V_J(e)) and
+    dg/dm_i = -R_i^T (B x a_e) for links i >= J(e).
     """
     n = rotations.shape[0]
-    size = 3 * n
-    rhs = np.zeros((size, 3 + size))   # -dg/dp: [field | moments]
-    for e in range(size):
+    size, count = 3 * n, free.shape[0]
+    rhs = np.zeros((count, 3 + size))   # -dg/dp: [field | moments]
+    reduced = np.empty((count, count))
+    for row in range(count):
+        e = free[row]
+        for column in range(count):
+            reduced[row, column] = hessian[e, free[column]]
         j, a = e // 3, axes[e // 3, e % 3]
         v = distal_moments[j]
-        rhs[e, 0] = a[1] * v[2] - a[2] * v[1]
-        rhs[e, 1] = a[2] * v[0] - a[0] * v[2]
-        rhs[e, 2] = a[0] * v[1] - a[1] * v[0]
+        rhs[row, 0] = a[1] * v[2] - a[2] * v[1]
+        rhs[row, 1] = a[2] * v[0] - a[0] * v[2]
+        rhs[row, 2] = a[0] * v[1] - a[1] * v[0]
         bxa0 = field[1] * a[2] - field[2] * a[1]
         bxa1 = field[2] * a[0] - field[0] * a[2]
         bxa2 = field[0] * a[1] - field[1] * a[0]
         for i in range(j, n):
             for c in range(3):
-                rhs[e, 3 + 3 * i + c] = (rotations[i, 0, c] * bxa0 + rotations[i, 1, c] * bxa1
-                                         + rotations[i, 2, c] * bxa2)
-    dq = np.linalg.solve(hessian, rhs)
+                rhs[row, 3 + 3 * i + c] = (rotations[i, 0, c] * bxa0
+                                           + rotations[i, 1, c] * bxa1
+                                           + rotations[i, 2, c] * bxa2)
+    dq = np.linalg.solve(reduced, rhs)
     # d p_k / d q_e = a_e x (p_k - p_J(e)) for points k past joint J(e)
     dp = np.zeros((n + 1, 3, 3 + size))
-    for e in range(size):
+    for row in range(count):
+        e = free[row]
         j, a = e // 3, axes[e // 3, e % 3]
         for k in range(j + 1, n + 1):
             lever0 = points[k, 0] - points[j, 0]
@@ -157,8 +165,8 @@ def sensitivities(rotations, axes, points, distal_moments, hessian, field):
             c1 = a[2] * lever0 - a[0] * lever2
             c2 = a[0] * lever1 - a[1] * lever0
             for p in range(3 + size):
-                dp[k, 0, p] += c0 * dq[e, p]
-                dp[k, 1, p] += c1 * dq[e, p]
-                dp[k, 2, p] += c2 * dq[e, p]
+                dp[k, 0, p] += c0 * dq[row, p]
+                dp[k, 1, p] += c1 * dq[row, p]
+                dp[k, 2, p] += c2 * dq[row, p]
     return (np.ascontiguousarray(dq[:, :3]), np.ascontiguousarray(dq[:, 3:]),
             np.ascontiguousarray(dp[:, :, :3]), np.ascontiguousarray(dp[:, :, 3:]))

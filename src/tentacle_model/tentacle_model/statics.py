@@ -30,7 +30,7 @@ import time
 import numpy as np
 from scipy.linalg import eigh, eigh_tridiagonal, LinAlgError, solveh_banded
 from scipy.linalg.lapack import dpotrf as potrf, dpotrs as potrs, dptsv as ptsv
-from tentacle_model import link_loads, planar, spatial, spatial_newton
+from tentacle_model import link_loads, planar, planar_newton, spatial, spatial_newton
 from tentacle_model.chain import Chain, MAX_CHAIN_LINKS, ProblemTooLarge
 from tentacle_model.dipoles import Contact
 from threadpoolctl import ThreadpoolController
@@ -299,11 +299,13 @@ def compile_kernels():
     planar.smallest_eigenvalue(one, np.zeros(0))
     chain = Chain(one, np.ones((1, 3)), np.ones((1, 3)), one, one, np.zeros(3), np.eye(3))
     spatial.evaluate(chain, np.zeros((1, 3)), np.zeros(3))
-    minimiser = _Spatial(chain, np.zeros(3), np.zeros(3))
-    _minimise_compiled(minimiser, np.zeros(3), 1e-9, 1, np.inf, np.inf)
+    for minimiser, x in ((_Spatial(chain, np.zeros(3), np.zeros(3)), np.zeros(3)),
+                         (_Planar(chain, np.zeros(3), np.zeros(3)), np.zeros(1))):
+        _minimise_compiled(minimiser, x, 1e-9, 1, np.inf, np.inf)
     evaluation = spatial.evaluate(chain, np.zeros((1, 3)), np.zeros(3))
     spatial_newton.sensitivities(evaluation.rotations, evaluation.axes, evaluation.points_m,
-                                 evaluation.distal_moments, evaluation.hessian, np.zeros(3))
+                                 evaluation.distal_moments, evaluation.hessian, np.zeros(3),
+                                 np.arange(3))
     _COMPILED.append(True)
 
 
@@ -437,22 +439,31 @@ def _minimise(problem, x, tol, max_iterations, time_limit_s, deadline):
 
 def _minimise_compiled(problem, x, tol, max_iterations, time_limit_s, deadline):
     """
-    Return _minimise's result for a 3-DoF chain without link loads, by the compiled Newton.
+    Return _minimise's result for a chain without link loads, by the compiled Newton.
 
-    The same steps (spatial_newton.minimise), run in calls of COMPILED_STEP_WORK / size^2
-    Newton steps (at least one) with the deadline checked before each call (none past it):
-    a call is well under a millisecond at any size a call holds more than one step.
+    The same steps (spatial_newton.minimise, planar_newton.minimise), run in calls of
+    COMPILED_STEP_WORK / size^2 Newton steps (at least one) with the deadline checked before
+    each call (none past it): a call is well under a millisecond at any size a call holds
+    more than one step.
     """
-    chain = problem.chain
     steps = max(1, COMPILED_STEP_WORK // problem.size ** 2)
+    newton = (MAX_STEP_RAD, MAX_SADDLE_ESCAPES, ESCAPE_STEP_RAD)
+    if isinstance(problem, _Spatial):
+        chain = problem.chain
+        arguments = (chain.base_rotation, chain.base_position_m, chain.lengths_m,
+                     np.ascontiguousarray(chain.moments_a_m2, dtype=float), problem.levers,
+                     chain.stiffness_n_m, problem.field, problem.gravity, tol, problem.k_floor,
+                     max_iterations)
+        minimise = spatial_newton.minimise
+    else:
+        arguments = (problem.k, problem.a, problem.b, problem.load_scale, tol,
+                     problem.k_floor, max_iterations)
+        minimise = planar_newton.minimise
     iterations = escapes = 0
     while True:
-        x, status, iterations, escapes, residual, stability = spatial_newton.minimise(
-            x, chain.base_rotation, chain.base_position_m, chain.lengths_m,
-            np.ascontiguousarray(chain.moments_a_m2, dtype=float), problem.levers,
-            chain.stiffness_n_m, problem.field, problem.gravity, tol, problem.k_floor,
-            max_iterations, iterations, escapes, 0 if time.monotonic() > deadline else steps,
-            MAX_STEP_RAD, MAX_SADDLE_ESCAPES, ESCAPE_STEP_RAD)
+        x, status, iterations, escapes, residual, stability = minimise(
+            x, *arguments, iterations, escapes, 0 if time.monotonic() > deadline else steps,
+            *newton)
         if status != spatial_newton.RUNNING:
             break
         if time.monotonic() > deadline:
@@ -545,8 +556,9 @@ def _solve(problem, x, shape, tol, max_iterations, time_limit_s, deadline):
             return Equilibrium(np.full(shape, np.nan), np.full(points_shape, np.nan), False,
                                'linearised model has no minimum (Hessian not positive '
                                'definite)', 0, np.nan, lowest, np.nan)
-    minimiser = _minimise_compiled if isinstance(problem, _Spatial) and not problem.loads \
-        else _minimise
+    compiled = isinstance(problem, (_Spatial, _Planar)) and not (
+        problem.loads or problem.linear)
+    minimiser = _minimise_compiled if compiled else _minimise
     x, reason, iterations, residual, stability = minimiser(problem, x, tol, max_iterations,
                                                            time_limit_s, deadline)
     if not np.all(np.isfinite(x)):

@@ -229,28 +229,30 @@ def test_magnets_that_fold_together_are_reported_not_collapsed(dof):
     assert gap >= 0.001 * (1 - 1e-9)  # stopped at the radii, never inside
 
 
-def test_the_compiled_newton_takes_the_generic_minimisers_steps(cantilever, braided):
-    # A 3-DoF chain without link loads is minimised by spatial_newton (compiled): it takes
-    # statics._minimise's steps (the generic loop the other joint models still run),
+@pytest.mark.parametrize('dof', [1, 3])
+def test_the_compiled_newton_takes_the_generic_minimisers_steps(cantilever, braided, dof):
+    # A chain without link loads is minimised compiled (spatial_newton, planar_newton): it
+    # takes statics._minimise's steps (the generic loop the models with loads still run),
     # through indefinite Hessians, saddles and the step cap, to the same state and reason.
-    from tentacle_model.statics import _minimise, _minimise_compiled, _Spatial
+    from tentacle_model.statics import _minimise, _minimise_compiled, _Planar, _Spatial
+    model, size = (_Spatial, 3) if dof == 3 else (_Planar, 1)
     rng = np.random.default_rng(5)
     reasons = set()
     # the straight rod antiparallel to a strong field: a saddle to leave (stiffer out of the
     # base plane: one escape direction, where a round rod's two are any pair of the plane)
     rod = discretise(cantilever[0], sublinks=8)
     rod = replace(rod, stiffness_n_m=rod.stiffness_n_m * [1.0, 1.5, 1.0])
-    cases = [(rod, np.array([-5e-3, 0.0, 0.0]), np.zeros(3), np.zeros(24), 200)]
+    cases = [(rod, np.array([-5e-3, 0.0, 0.0]), np.zeros(3), np.zeros(8 * size), 200)]
     for trial in range(60):
         chain = discretise(braided, braided.length_m * rng.uniform(0.3, 1.0), 2)
         moments = chain.moments_a_m2 * rng.choice([-1.0, 1.0], size=(chain.size, 1))
         cases.append((replace(chain, moments_a_m2=moments), rng.uniform(-0.02, 0.02, 3),
-                      np.array([0.0, 0.0, -9.81]), rng.normal(0.0, 0.4, 3 * chain.size),
+                      np.array([0.0, -9.81, -9.81]), rng.normal(0.0, 0.4, size * chain.size),
                       int(rng.choice([3, 200]))))   # some run out of iterations
     for chain, field_t, gravity, start, iterations in cases:
-        generic = _minimise(_Spatial(chain, field_t, gravity), start.copy(), 1e-9, iterations,
+        generic = _minimise(model(chain, field_t, gravity), start.copy(), 1e-9, iterations,
                             60.0, time.monotonic() + 60.0)
-        compiled = _minimise_compiled(_Spatial(chain, field_t, gravity), start.copy(), 1e-9,
+        compiled = _minimise_compiled(model(chain, field_t, gravity), start.copy(), 1e-9,
                                       iterations, 60.0, time.monotonic() + 60.0)
         assert compiled[1:3] == generic[1:3]
         assert compiled[0] == pytest.approx(generic[0], abs=1e-9)

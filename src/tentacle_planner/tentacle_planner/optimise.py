@@ -166,8 +166,8 @@ class Problem:
                                     for i in model.chain(s).segment_index])
                        for s in self.steps_m}
         self.neighbour_weight = NEIGHBOUR_WEIGHTS[-1]
-        # the compiled key step (step_residuals) where the model allows: 3-DoF, no dipoles
-        self._steps = self._step_arrays() if model.dof == 3 and not model.dipoles else None
+        # the compiled key step (step_residuals) where the model allows: no dipoles
+        self._steps = None if model.dipoles else self._step_arrays()
         # (lower (3,), upper (3,)) each axis of every step's field, T, within the limits: what
         # the rig can reach from the step before (dense playback); 3-axis fields only
         self.field_box_t = None
@@ -188,13 +188,15 @@ class Problem:
             carry = np.full(chain.size, -1) if previous is None else model.carry_index(
                 previous, inserted_m)
             weight = 1.0 / (self.length_m * math.sqrt(len(self.steps_m) * len(target)))
+            # statics' torque floor: of the joints' stiffness the model has
+            modelled = chain.stiffness_n_m if model.dof == 3 else chain.stiffness_n_m[:, 0]
             out.append((carry, (
                 chain.base_rotation, chain.base_position_m, chain.lengths_m,
                 self._magnitudes[inserted_m], chain.segment_index), (
                 spatial.gravity_levers(chain), chain.stiffness_n_m), (
-                model.gravity_m_s2, model.tol,
-                max(1e-9 * np.max(chain.stiffness_n_m), 1e-300), model.max_iterations, newton,
-                target, weight, self._radii[inserted_m], *obstacles, *keep),
+                model.gravity_m_s2, model.tol, max(1e-9 * np.max(modelled), 1e-300),
+                model.max_iterations, newton, model.free_angles(chain.size), target, weight,
+                self._radii[inserted_m], *obstacles, *keep),
                 float(np.min(chain.stiffness_n_m))))
             previous = inserted_m
         first = np.full(len(model.spec.segments), -1)
@@ -339,9 +341,11 @@ class Problem:
         r = np.zeros(offsets[-1] + len(neighbours))
         jac = np.zeros((len(r), self.size) if jacobian else (0, 0))
         state = None if self.start is None else np.asarray(self.start[0], dtype=float)
+        kernel = step_residuals.step_residuals if self.model.dof == 3 else \
+            step_residuals.planar_step_residuals
         for k, (carry, chain, stiff, rest, least_stiffness) in enumerate(self._steps):
             rows = slice(offsets[k], offsets[k + 1])
-            state, usable, stability = step_residuals.step_residuals(
+            state, usable, stability = kernel(
                 step_residuals.carried(state, carry) if state is not None else
                 np.zeros((len(carry), 3)), *chain, directions, *stiff, fields[k], *rest,
                 derivatives, first, n_dir, field_map, self._field_slice(k).start, r[rows],
@@ -447,18 +451,33 @@ class Problem:
         if not jacobian:
             return penalty, d_penalty
         n_dir = len(self.free_segments) * self.angles_per_segment
-        inserted_m = self.steps_m[k]
         for j in [*range(n_dir), *range(self.size)[self._field_slice(k)]]:
             moved = x.copy()
             moved[j] += MARGIN_STEP
-            directions, fields = self.unpack(moved)
+            other = self._margin_from(k, state, moved)
+            if other is not None:
+                d_margin = (other - margin) / MARGIN_STEP
+                d_penalty[j] = -STABILITY_WEIGHT / self.min_margin * d_margin
+        return penalty, d_penalty
+
+    def _margin_from(self, k, state, x):
+        """Return step k's stability margin at x solved from state, or None: not converged."""
+        directions, fields = self.unpack(x)
+        inserted_m = self.steps_m[k]
+        if self._steps is None:
             other = self.model.solve(inserted_m, fields[k], state,
                                      self._moments(directions, inserted_m),
                                      self.backbones_m[k])
-            if other.equilibrium.converged:
-                d_margin = (self.margin(other, fields[k]) - margin) / MARGIN_STEP
-                d_penalty[j] = -STABILITY_WEIGHT / self.min_margin * d_margin
-        return penalty, d_penalty
+            return self.margin(other, fields[k]) if other.equilibrium.converged else None
+        carry, chain, stiff, rest, least_stiffness = self._steps[k]
+        first, field_map, offsets = self._columns
+        kernel = step_residuals.step_residuals if self.model.dof == 3 else \
+            step_residuals.planar_step_residuals
+        _, usable, stability = kernel(
+            state, *chain, directions, *stiff, fields[k], *rest,
+            np.zeros((len(directions), self.angles_per_segment, 3)), first, 0, field_map, 0,
+            np.zeros(offsets[k + 1] - offsets[k]), np.zeros((0, 0)), False)
+        return stability / least_stiffness if usable else None
 
     def objective(self, x):
         """Return (objective, gradient (size,)) at x; the objective is dimensionless."""

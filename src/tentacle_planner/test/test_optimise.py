@@ -302,15 +302,18 @@ def test_side_by_side_gives_what_one_process_gives_in_order():
     assert side_by_side(work, range(5), workers=2) == alone
 
 
-def test_the_compiled_key_step_gives_the_generic_residuals(braided):
-    # A 3-DoF model without dipoles runs each key step compiled (step_residuals.py): the
-    # residuals and Jacobian of the generic per-step path, through walls and a ball,
-    # non-converged steps, a start state and held directions.
+@pytest.mark.parametrize('dof', [1, 3])
+def test_the_compiled_key_step_gives_the_generic_residuals(braided, dof):
+    # A model without dipoles runs each key step compiled (step_residuals.py): the residuals
+    # and Jacobian of the generic per-step path, through walls and a ball, non-converged
+    # steps, a start state and held directions.
     from tentacle_planner.planner import problem_of
     from tentacle_planner.scene import load_scene
-    scene = load_scene(ROOT / 'config' / 'scenes' / 'pancreatic_duct.yaml')
-    duct = problem_of(scene)
-    model = TentacleModel(braided, dof=3, sublinks=2, max_iterations=4)   # some fail
+    scene = load_scene(ROOT / 'config' / 'scenes' / (
+        'pancreatic_duct.yaml' if dof == 3 else 'ch3_b.yaml'))
+    shipped = problem_of(scene)
+    model = TentacleModel(braided, dof=dof, sublinks=2, max_iterations=4,   # some fail
+                          gravity_m_s2=(0.0, -9.81, 0.0))
     targets = [model.chain(s).base_position_m + np.zeros((model.chain(s).size + 1, 3))
                for s in STEPS_M[1:]]
     ball = KeepOff(spheres=(Sphere(np.array([0.03, 0.004, 0.0]), 0.002),), margin_m=0.001)
@@ -320,7 +323,7 @@ def test_the_compiled_key_step_gives_the_generic_residuals(braided):
                    keep_off=ball)
     rng = np.random.default_rng(11)
     failed = 0
-    for problem in (duct, held):
+    for problem in (shipped, held):
         assert problem._steps is not None   # the compiled path is the one in use
         n_dir = len(problem.free_segments) * problem.angles_per_segment
         for _ in range(12):

@@ -27,6 +27,8 @@ import sys
 import tempfile
 
 from tentacle_planner.errors import PlanInputError
+from tentacle_planner.search_defaults import (DEFAULT_ITERATIONS, DEFAULT_MIN_GAIN,
+                                              DEFAULT_STARTS)
 
 MAX_STARTS = 10_000       # random starts: each is a fit of its own (seconds)
 MAX_ITERATIONS = 100_000  # model evaluations per start
@@ -64,14 +66,19 @@ def build_parser():
                         help='where schedule.yaml and plan.png go')
     parser.add_argument('--seed', type=_whole(0), default=0,
                         help='seeds the multi-start: a whole number >= 0')
-    parser.add_argument('--starts', type=_whole(1, MAX_STARTS), default=8,
-                        help=f'starts of the multi-start, 1 to {MAX_STARTS} (default 8)')
-    parser.add_argument('--min-gain', type=_fraction, default=0.1,
+    parser.add_argument('--starts', type=_whole(1, MAX_STARTS), default=DEFAULT_STARTS,
+                        help=f'starts of the multi-start, 1 to {MAX_STARTS} (default '
+                        f'{DEFAULT_STARTS})')
+    parser.add_argument('--min-gain', type=_fraction, default=DEFAULT_MIN_GAIN,
                         help='end the search once a round of two starts lowers the best '
-                        'objective by less than this fraction, 0 to 1 (default 0.1; 0: '
-                        'every start, the exhaustive search)')
-    parser.add_argument('--iterations', type=_whole(1, MAX_ITERATIONS), default=100,
-                        help=f'model evaluations per start, 1 to {MAX_ITERATIONS} (default 100)')
+                        'objective by less than this fraction, 0 to 1, never after the '
+                        f'first round (default {DEFAULT_MIN_GAIN:g}; 0: every start, the '
+                        'exhaustive search)')
+    parser.add_argument('--iterations', type=_whole(1, MAX_ITERATIONS),
+                        default=DEFAULT_ITERATIONS,
+                        help=f'model evaluations per start, 1 to {MAX_ITERATIONS} (default '
+                        f'{DEFAULT_ITERATIONS}; the exhaustive search of before: --starts 8 '
+                        '--iterations 100 --min-gain 0)')
     parser.add_argument('--baseline', choices=('tip-driven',), default=None,
                         help='tip-driven: every magnetisation axial, fields only')
     parser.add_argument('--first-stage', choices=('torque-balance',), default=None,

@@ -23,17 +23,13 @@ from tentacle_planner.optimise import (clean, Constraints, KeepOff, leading, opt
 from tentacle_planner.playback import playback
 from tentacle_planner.robustness import (on_the_rig, perturbed_problems, played_densely,
                                          report, RobustProblem)
+from tentacle_planner.search_defaults import (DEFAULT_ITERATIONS, DEFAULT_MIN_GAIN,
+                                              DEFAULT_STARTS)
 
 HIGHER_FIDELITY_SUBLINKS = 4  # sub-links per planning link in the re-check
 REFINE_TOLERANCE = 0.1        # the re-check may be this much (of the error) worse: confirmed
 WORKERS = 2                   # processes fitting starts side by side, at most
 REFINED = 2                   # plans refine polishes and re-checks side by side, a round
-DEFAULT_STARTS = 8
-DEFAULT_MIN_GAIN = 0.1
-"""By default the search ends once a round of two starts lowers the best objective by less
-than 10%: most scenes end after two rounds (pancreatic_duct, medians of three seeds: 8.3 s,
-re-checked at 0.86% of L, against 14.0 s and 0.81% for every start); one round was not
-enough for ch3_b (0.69 mm re-checked, 0.13 mm after two)."""
 
 
 def default_workers():
@@ -191,8 +187,8 @@ def refined(scene, problem, plans, iterations, workers=1):
     model may run into a wall in the finer one). Of those refined, the one without flags,
     running least deep into a wall and then of least re-checked error comes first: the
     search's best in the planning model is not always the best re-checked (ch3_b: 0.69 mm
-    against 0.13 mm). Asked for another (its dense playback touched), the next refined, or
-    the next plans refined.
+    against 0.13 mm). Asked for another (its dense playback touched), every plan is refined
+    and the next in that order comes.
     """
     finest = higher_fidelity_sublinks(scene)
     if finest is None or not problem.free_segments:
@@ -201,9 +197,10 @@ def refined(scene, problem, plans, iterations, workers=1):
         for plan in plans:
             yield problem, plan, None
         return
-    done, pending = [], list(plans)
+    done, pending, asked_again = [], list(plans), False
     while done or pending:
-        if pending and not any(clean(entry[3]) for entry in done):   # refine more
+        # the first: once one is clean; asked again: of them all
+        if pending and (asked_again or not any(clean(entry[3]) for entry in done)):
             done += side_by_side(partial(_refined, scene, problem, finest, iterations),
                                  pending[:REFINED], workers)
             pending = pending[REFINED:]
@@ -212,6 +209,7 @@ def refined(scene, problem, plans, iterations, workers=1):
                                                   key=lambda i: done[i][3]))
         yield (problem if sublinks == problem.model.sublinks else
                finer_problem(scene, problem, sublinks)), plan, checked
+        asked_again = True
 
 
 def _refined(scene, problem, finest, iterations, plan):
@@ -274,7 +272,7 @@ def recheck(scene, plan):
     return rows, flags
 
 
-def plan_scene(scene, *, seed=0, starts=DEFAULT_STARTS, iterations=100,
+def plan_scene(scene, *, seed=0, starts=DEFAULT_STARTS, iterations=DEFAULT_ITERATIONS,
                min_gain=DEFAULT_MIN_GAIN, tip_driven=False, robust=False, progress=None,
                first_stage=False, workers=None):
     """

@@ -12,6 +12,7 @@ $(STAMP): requirements.txt
 	$(PYTHON) -m venv $(VENV) || { echo 'make: $(PYTHON) -m venv failed; on Debian: apt-get install python3-venv'; exit 1; }
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -r requirements.txt
+	$(PY) scripts/build_kernels.py
 	touch $(STAMP)
 
 # The main job: plan the pancreatic duct, play it on the simulated rig open loop, closed

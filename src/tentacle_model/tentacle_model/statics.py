@@ -290,7 +290,8 @@ def compile_kernels():
     Compile (or load from numba's cache) the compiled passes, once per process.
 
     solve() calls it before its clock starts; call it ahead to keep the first solve's wall
-    time down too (9 s on a fresh machine, 0.5 s from the cache).
+    time down too (20 s on a fresh machine, 0.2 s from the cache; make venv builds the cache:
+    scripts/build_kernels.py).
     """
     if _COMPILED:
         return

@@ -56,7 +56,7 @@ def cached_plan(scene, out_dir, tip_driven):
     from tentacle_planner.plan_plot import write_plot
     from tentacle_planner.planner import plan_scene
     from tentacle_planner.schedule_writer import write_schedule_file
-    say(f'{what}: planning {scene.name} (about 10 s; cached in {path} for the next run)')
+    say(f'{what}: planning {scene.name} (a few seconds; cached in {path} for the next run)')
     started = time.monotonic()
     result = plan_scene(scene, tip_driven=tip_driven)
     written = write_schedule_file(out_dir, result)

@@ -150,8 +150,9 @@ def test_the_chain_cache_stays_bounded_under_continuous_insertion(braided):
     assert model.chain(lengths[-1]) is recent   # the one in use is kept
 
 
-def test_a_solve_within_its_own_time_budget(braided):
-    model = TentacleModel(braided, dof=3, sublinks=2)
+@pytest.mark.parametrize('dof', [1, 3])   # both solved by a compiled Newton, in calls
+def test_a_solve_within_its_own_time_budget(braided, dof):
+    model = TentacleModel(braided, dof=dof, sublinks=2)
     full = model.solve(braided.length_m, BRAIDED_FIELD)
     assert full.equilibrium.converged
     cut = model.solve(braided.length_m, BRAIDED_FIELD, time_limit_s=0.0)

@@ -333,7 +333,8 @@ class Problem:
         elevations = x[1:n_dir:2] if self.angles_per_segment == 2 else np.zeros(len(azimuths))
         ca, sa, ce, se = np.cos(azimuths), np.sin(azimuths), np.cos(elevations), \
             np.sin(elevations)
-        derivatives[self.free_segments, 0] = np.column_stack([-ce * sa, ce * ca, 0 * ca])
+        derivatives[self.free_segments, 0] = np.column_stack([-ce * sa, ce * ca,
+                                                              np.zeros_like(ca)])
         if self.angles_per_segment == 2:
             derivatives[self.free_segments, 1] = np.column_stack([-se * ca, -se * sa, ce])
         first, field_map, offsets = self._columns
@@ -341,11 +342,9 @@ class Problem:
         r = np.zeros(offsets[-1] + len(neighbours))
         jac = np.zeros((len(r), self.size) if jacobian else (0, 0))
         state = None if self.start is None else np.asarray(self.start[0], dtype=float)
-        kernel = step_residuals.step_residuals if self.model.dof == 3 else \
-            step_residuals.planar_step_residuals
         for k, (carry, chain, stiff, rest, least_stiffness) in enumerate(self._steps):
             rows = slice(offsets[k], offsets[k + 1])
-            state, usable, stability = kernel(
+            state, usable, stability = self._kernel(
                 step_residuals.carried(state, carry) if state is not None else
                 np.zeros((len(carry), 3)), *chain, directions, *stiff, fields[k], *rest,
                 derivatives, first, n_dir, field_map, self._field_slice(k).start, r[rows],
@@ -360,6 +359,12 @@ class Problem:
         if jacobian:
             jac[offsets[-1]:] = d_neighbours
         return r, jac if jacobian else None
+
+    @property
+    def _kernel(self):
+        """Return the compiled key step of the model's joints."""
+        return step_residuals.step_residuals if self.model.dof == 3 else \
+            step_residuals.planar_step_residuals
 
     def _field_slice(self, k):
         """Return the columns of step k's field unknowns."""
@@ -471,9 +476,7 @@ class Problem:
             return self.margin(other, fields[k]) if other.equilibrium.converged else None
         carry, chain, stiff, rest, least_stiffness = self._steps[k]
         first, field_map, offsets = self._columns
-        kernel = step_residuals.step_residuals if self.model.dof == 3 else \
-            step_residuals.planar_step_residuals
-        _, usable, stability = kernel(
+        _, usable, stability = self._kernel(
             state, *chain, directions, *stiff, fields[k], *rest,
             np.zeros((len(directions), self.angles_per_segment, 3)), first, 0, field_map, 0,
             np.zeros(offsets[k + 1] - offsets[k]), np.zeros((0, 0)), False)

@@ -23,8 +23,8 @@ class DipoleLoad:
 
     def __call__(self, moments_a_m2, centres_m, hessian):
         """Return the Interaction at world moments (n, 3) and centres (n, 3)."""
-        return dipoles.interaction(moments_a_m2, centres_m, self.pairs, hessian,
-                                   self.contact_m)
+        return dipoles.pair_interaction(moments_a_m2, centres_m, *self.pairs, hessian,
+                                        self.contact_m)
 
 
 def of_chain(chain, dipoles=False):

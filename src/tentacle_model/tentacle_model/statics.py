@@ -30,7 +30,7 @@ import time
 import numpy as np
 from scipy.linalg import eigh, eigh_tridiagonal, LinAlgError, solveh_banded
 from scipy.linalg.lapack import dpotrf as potrf, dpotrs as potrs, dptsv as ptsv
-from tentacle_model import link_loads, planar, planar_newton, spatial, spatial_newton
+from tentacle_model import dipoles, link_loads, planar, planar_newton, spatial, spatial_newton
 from tentacle_model.chain import Chain, MAX_CHAIN_LINKS, ProblemTooLarge
 from tentacle_model.dipoles import Contact
 from threadpoolctl import ThreadpoolController
@@ -304,6 +304,7 @@ def compile_kernels():
                          (_Planar(chain, np.zeros(3), np.zeros(3)), np.zeros(1))):
         _minimise_compiled(minimiser, x, 1e-9, 1, np.inf, np.inf)
     evaluation = spatial.evaluate(chain, np.zeros((1, 3)), np.zeros(3))
+    dipoles.pair_interaction(np.zeros((2, 3)), np.eye(3)[:2], np.array([0]), np.array([1]))
     spatial_newton.sensitivities(evaluation.rotations, evaluation.axes, evaluation.points_m,
                                  evaluation.distal_moments, evaluation.hessian, np.zeros(3),
                                  np.arange(3))

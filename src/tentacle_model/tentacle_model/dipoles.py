@@ -18,7 +18,8 @@ With p = a.u, q = b.u, s = a.b and v = q a + p b its derivatives are
 and dU/dc_j = dU/dr = -dU/dc_i (rows index the first variable, columns the second). U is
 bilinear in the moments of two different links, so d2U/da da = 0; it depends on the centres
 only through their differences, so in every row the blocks of the centres sum to zero and a
-link's own centre block is minus the sum of its blocks with the other links.
+link's own centre block is minus the sum of its blocks with the other links. All of it is
+one compiled pass over the pairs (_compiled).
 """
 
 from dataclasses import dataclass
@@ -89,41 +90,6 @@ def _checked(moments_a_m2, centres_m, pairs):
     if not (np.diff(key) > 0).all() and np.unique(key).size != key.size:
         raise ValueError('pairs must not repeat (in either order)')
     return m, c, i.astype(np.intp), j.astype(np.intp)
-
-
-def _outer(x, y):
-    """Return the outer products x y^T, (3, 3, p), of two (3, p) arrays (one per column)."""
-    return x[:, None] * y[None]
-
-
-def _sym_outer(x, y):
-    """Return x y^T + y x^T, (3, 3, p), symmetric to the last bit."""
-    xy = _outer(x, y)
-    xy += xy.swapaxes(0, 1)  # numpy buffers the overlapping operand
-    return xy
-
-
-def _sum_by_link(links, values, n):
-    """Return (..., n): the entries of values (..., q) summed by links (q,) in [0, n)."""
-    lead = values.shape[:-1]
-    rows = np.arange(math.prod(lead))[:, None] * n + links
-    return np.bincount(rows.ravel(), values.ravel(), rows.shape[0] * n).reshape(*lead, n)
-
-
-def _place(full, block, row_start, col_start, at_ij, at_ji):
-    """
-    Write symmetric blocks (3, 3, p) at (row link i, column link j) and at (j, i) of each pair.
-
-    :param full: the (size, size) Hessian, C-contiguous
-    :param row_start: 0 if the rows are moments, 3n if centres; col_start likewise
-    :param at_ij: (p,) flat index of entry (3 i, 3 j), i.e. 3 (i size + j); at_ji likewise
-    """
-    size = len(full)
-    row = row_start + np.arange(3)[:, None, None]  # (3, 1, 1)
-    col = col_start + np.arange(3)[:, None]  # (3, 1)
-    flat = full.reshape(-1)
-    flat[(row * size + col) + at_ij] = block
-    flat[(col * size + row) + at_ji] = block
 
 
 class Contact(ValueError):

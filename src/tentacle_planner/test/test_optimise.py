@@ -340,3 +340,21 @@ def test_the_compiled_key_step_gives_the_generic_residuals(braided, dof):
                                        atol=1e-12 * np.abs(generic_jac).max())
             failed += np.count_nonzero(r == 10.0) > 0
     assert failed   # some steps did not converge: their rows are the generic ones too
+
+
+def test_the_last_simulation_is_kept_for_its_own_unknowns_only(braided):
+    # plan() simulates x, then residuals() asks for x again: the second is not solved anew
+    # (a model with dipoles takes the per-step Python path), any other x is.
+    model = TentacleModel(braided, dof=3, sublinks=1, dipoles=True)
+    targets = [np.zeros((model.chain(s).size + 1, 3)) for s in STEPS_M]
+    problem = Problem(model, STEPS_M, targets, directions=np.tile([1.0, 0.0, 0.0], (5, 1)))
+    x = np.full(problem.size, 3.0)
+    first = problem.simulate(x)
+    assert problem.simulate(x.copy())[-1] is first[-1]           # kept
+    other = problem.simulate(x + 1.0)
+    assert not np.allclose(other[-1].points_m, first[-1].points_m)
+    again = problem.simulate(x)                                   # solved anew, the same
+    assert again[-1] is not first[-1]
+    np.testing.assert_array_equal(again[-1].points_m, first[-1].points_m)
+    first.clear()                                                 # a caller's list only
+    assert len(problem.simulate(x)) == len(STEPS_M)

@@ -299,11 +299,10 @@ def compile_kernels():
     planar.evaluate(one, one, one, one, False, True)
     planar.smallest_eigenvalue(one, np.zeros(0))
     chain = Chain(one, np.ones((1, 3)), np.ones((1, 3)), one, one, np.zeros(3), np.eye(3))
-    spatial.evaluate(chain, np.zeros((1, 3)), np.zeros(3))
+    evaluation = spatial.evaluate(chain, np.zeros((1, 3)), np.zeros(3))
     for minimiser, x in ((_Spatial(chain, np.zeros(3), np.zeros(3)), np.zeros(3)),
                          (_Planar(chain, np.zeros(3), np.zeros(3)), np.zeros(1))):
         _minimise_compiled(minimiser, x, 1e-9, 1, np.inf, np.inf)
-    evaluation = spatial.evaluate(chain, np.zeros((1, 3)), np.zeros(3))
     dipoles.pair_interaction(np.zeros((2, 3)), np.eye(3)[:2], np.array([0]), np.array([1]))
     spatial_newton.sensitivities(evaluation.rotations, evaluation.axes, evaluation.points_m,
                                  evaluation.distal_moments, evaluation.hessian, np.zeros(3),

@@ -948,11 +948,12 @@ def polish(problem, x0, iterations):
     Where a neighbour-angle limit binds, least squares first weighs it as residuals of
     growing weight (NEIGHBOUR_WEIGHTS), so the start moves to within the limit along a path
     of good shapes; SLSQP then keeps it exactly. Straight from a start far past the limit,
-    SLSQP often ended in a poor plan (pancreatic_duct: 0.8% of L became 13%).
+    SLSQP often ended in a poor plan (pancreatic_duct: 0.8% of L became 13%). A start within
+    the limit (a plan polished before, in a coarser model) goes straight to the last fit: the
+    loosened ones would let it wander past the limit first.
     """
-    within = not np.any(problem._neighbour_rows(x0, problem.unpack(x0)[0])[0])
     if problem.constraints.max_neighbour_angle_rad is not None and problem.free_segments \
-            and not within:
+            and np.any(problem._neighbour_rows(x0, problem.unpack(x0)[0])[0]):   # past it
         for weight in NEIGHBOUR_WEIGHTS[:-1]:
             problem.neighbour_weight = weight
             try:

@@ -114,7 +114,11 @@ def play_steps(schedule, axes=('inserter',), insertion_offset_m=0.0, retract=Fal
 
 def commanded_axes(schedule, axes=('inserter',)):
     """Return the stages a run of a schedule commands, of axes: [axis] (play_steps')."""
-    start, steps = play_steps(schedule, axes)
+    return _commanded(*play_steps(schedule, axes))
+
+
+def _commanded(start, steps):
+    """Return the stages a run of play_steps' (start, steps) commands, in order."""
     return list(dict.fromkeys([*start, *(a for s in steps for a in s.targets_m)]))
 
 
@@ -157,8 +161,7 @@ class Player:
             raise ValueError(f'the run is {self.phase.value}: start a new run to play again')
         # Every stage the run will command, not only those it starts from (a coiling run
         # starts the backbone wherever it is): without a reading the run would pause at once.
-        commanded = dict.fromkeys([*self.start_m, *(a for s in self.steps for a in s.targets_m)])
-        for axis in commanded:
+        for axis in _commanded(self.start_m, self.steps):
             if seen.positions_m.get(axis) is None:
                 raise ValueError(f'no position from the {axis} yet: is its node running?')
         for axis, start in self.start_m.items():

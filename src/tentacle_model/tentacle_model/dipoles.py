@@ -175,39 +175,44 @@ def _compiled(m, c, i, j, limits, hessian):
     energy = 0.0
     own_mc = np.zeros((n, 3, 3))   # a link's moment-centre block: minus its others' sum
     own_cc = np.zeros((n, 3, 3))
-    eye = np.eye(3)
+    # Scratch written in place pair by pair: an array made per pair cost more than its maths.
+    u, v = np.empty(3), np.empty(3)
+    h_ab, h_ar, h_br, h_rr = (np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)),
+                              np.empty((3, 3)))
     for k in range(count):
         a, b = m[i[k]], m[j[k]]
-        r = c[j[k]] - c[i[k]]
         e = _K / d[k] ** 3
         f = e / d[k]
         g = f / d[k]
-        u = r / d[k]
-        p, q, s = a @ u, b @ u, a @ b
+        p = q = s = 0.0
+        for x in range(3):
+            u[x] = (c[j[k], x] - c[i[k], x]) / d[k]
+            p += a[x] * u[x]
+            q += b[x] * u[x]
+            s += a[x] * b[x]
         pq = p * q
-        v = q * a + p * b
         energy += e * (s - 3 * pq)
-        grad_r = f * (15 * pq * u - 3 * (s * u + v))
-        grad_m[i[k]] += e * (b - 3 * q * u)
-        grad_m[j[k]] += e * (a - 3 * p * u)
-        grad_c[i[k]] -= grad_r
-        grad_c[j[k]] += grad_r
+        for x in range(3):
+            v[x] = q * a[x] + p * b[x]
+            grad_r = f * (15 * pq * u[x] - 3 * (s * u[x] + v[x]))
+            grad_m[i[k], x] += e * (b[x] - 3 * q * u[x])
+            grad_m[j[k], x] += e * (a[x] - 3 * p * u[x])
+            grad_c[i[k], x] -= grad_r
+            grad_c[j[k], x] += grad_r
         if not hessian:
             continue
-        h_ab, h_ar, h_br, h_rr = (np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)),
-                                  np.zeros((3, 3)))
         for row in range(3):
             for col in range(row, 3):
                 uu = u[row] * u[col]
-                h_ab[row, col] = e * eye[row, col] - 3 * e * uu
+                eye = 1.0 if row == col else 0.0
+                h_ab[row, col] = e * eye - 3 * e * uu
                 h_ar[row, col] = 15 * f * q * uu - 3 * f * (b[row] * u[col] + u[row] * b[col]) \
-                    - 3 * f * q * eye[row, col]
+                    - 3 * f * q * eye
                 h_br[row, col] = 15 * f * p * uu - 3 * f * (a[row] * u[col] + u[row] * a[col]) \
-                    - 3 * f * p * eye[row, col]
+                    - 3 * f * p * eye
                 h_rr[row, col] = g * (15 * (s * uu + (v[row] * u[col] + u[row] * v[col])
-                                            + pq * eye[row, col]) - 105 * pq * uu
-                                      - 3 * (s * eye[row, col]
-                                             + (a[row] * b[col] + b[row] * a[col])))
+                                            + pq * eye) - 105 * pq * uu
+                                      - 3 * (s * eye + (a[row] * b[col] + b[row] * a[col])))
                 for block in (h_ab, h_ar, h_br, h_rr):
                     block[col, row] = block[row, col]
         mi, mj, ci, cj = 3 * i[k], 3 * j[k], 3 * n + 3 * i[k], 3 * n + 3 * j[k]
@@ -217,10 +222,10 @@ def _compiled(m, c, i, j, limits, hessian):
                 full[mi + row, cj + col] = full[cj + col, mi + row] = h_ar[row, col]
                 full[ci + row, mj + col] = full[mj + col, ci + row] = -h_br[row, col]
                 full[ci + row, cj + col] = full[cj + col, ci + row] = -h_rr[row, col]
-        own_mc[i[k]] -= h_ar
-        own_mc[j[k]] += h_br
-        own_cc[i[k]] += h_rr
-        own_cc[j[k]] += h_rr
+                own_mc[i[k], row, col] -= h_ar[row, col]
+                own_mc[j[k], row, col] += h_br[row, col]
+                own_cc[i[k], row, col] += h_rr[row, col]
+                own_cc[j[k], row, col] += h_rr[row, col]
     if hessian:
         for link in range(n):
             mi, ci = 3 * link, 3 * n + 3 * link

@@ -166,36 +166,96 @@ def project_loads(chain, theta, loads, hessian=True):
     :param loads: link_loads.py callables, e.g. link_loads.of_chain(chain, dipoles=True)
     :raises dipoles.Contact: two interacting magnets closer than they may come
     """
-    n = len(theta)
-    c, s = np.cos(theta), np.sin(theta)
-    local = chain.moments_a_m2
-    in_plane = np.column_stack([c * local[:, 0] - s * local[:, 1],
-                                s * local[:, 0] + c * local[:, 1], np.zeros(n)])
-    base = chain.base_rotation
-    moments = (in_plane + local[:, 2:] * [0.0, 0.0, 1.0]) @ base.T
-    u = np.column_stack([c, s, np.zeros(n)]) @ base.T
-    steps = chain.lengths_m[:, None] * u
-    joints = np.vstack([np.zeros(3), np.cumsum(steps, axis=0)[:-1]])
-    centres = chain.base_position_m + joints + 0.5 * steps
+    moments, centres, u = _links(np.ascontiguousarray(theta, dtype=float), chain.moments_a_m2,
+                                 chain.lengths_m, chain.base_rotation, chain.base_position_m)
     loads = link_loads.total(loads, moments, centres, hessian)
     if loads is None:
+        n = len(theta)
         return 0.0, np.zeros(n), np.zeros((n, n)) if hessian else None
-    z = base[:, 2]
-    z_m, z_u = np.cross(z, moments), np.cross(z, u)
-    g, f = loads.grad_moments, loads.grad_centres
-    # Force sums over the links a joint's turn carries: all beyond it, half of its own.
-    lever_force = np.cumsum(f[::-1], axis=0)[::-1] - 0.5 * f
-    gradient = np.sum(g * z_m, axis=1) + chain.lengths_m * np.sum(lever_force * z_u, axis=1)
-    if not hessian:
-        return loads.energy_j, gradient, None
-    weight = np.tril(np.broadcast_to(chain.lengths_m, (n, n)), -1) + np.diag(
-        0.5 * chain.lengths_m)                                     # [link i, angle j]
-    jac = np.zeros((6 * n, n))
-    jac[:3 * n] = (np.eye(n)[:, None, :] * z_m[:, :, None]).reshape(3 * n, n)
-    jac[3 * n:] = (weight[:, None, :] * z_u.T[None, :, :]).reshape(3 * n, n)
-    m_perp = moments - np.outer(moments @ z, z)
-    diagonal = -np.sum(g * m_perp, axis=1) - chain.lengths_m * np.sum(lever_force * u, axis=1)
-    return loads.energy_j, gradient, jac.T @ loads.hessian @ jac + np.diag(diagonal)
+    gradient, hess = _projected(chain.lengths_m, chain.base_rotation[:, 2].copy(), moments, u,
+                                loads.grad_moments, loads.grad_centres,
+                                loads.hessian if hessian else np.zeros((0, 0)), hessian)
+    return loads.energy_j, gradient, hess if hessian else None
+
+
+@numba.njit(cache=True)
+def _links(theta, local, lengths, base_rotation, base_position):
+    """Return world moments, centres and directions u_i (each (n, 3)) of the links."""
+    n = theta.shape[0]
+    moments, centres, u = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
+    joint = base_position.copy()
+    for i in range(n):
+        c, s = np.cos(theta[i]), np.sin(theta[i])
+        m0 = c * local[i, 0] - s * local[i, 1]
+        m1 = s * local[i, 0] + c * local[i, 1]
+        for r in range(3):
+            moments[i, r] = (base_rotation[r, 0] * m0 + base_rotation[r, 1] * m1
+                             + base_rotation[r, 2] * local[i, 2])
+            u[i, r] = base_rotation[r, 0] * c + base_rotation[r, 1] * s
+            centres[i, r] = joint[r] + 0.5 * lengths[i] * u[i, r]
+            joint[r] += lengths[i] * u[i, r]
+    return moments, centres, u
+
+
+@numba.njit(cache=True)
+def _projected(lengths, z, moments, u, grad_m, grad_c, hess_x, want_hessian):
+    """
+    Compiled tail of project_loads: the gradient, and J^T H_xx J plus the diagonal term.
+
+    J is never formed: its moment rows are diagonal (z x m_i) and its centre rows lower
+    triangular (h_j z x u_j for j < i, half for j = i), so a row of H_xx times J is a suffix
+    sum over the links, O(n) (_times_jacobian), and the product O(n^2).
+    """
+    n = moments.shape[0]
+    z_m, z_u = np.empty((n, 3)), np.empty((n, 3))
+    for i in range(n):
+        z_m[i] = _cross(z, moments[i])
+        z_u[i] = _cross(z, u[i])
+    lever_force = np.empty((n, 3))   # the force a joint's turn carries: links beyond, half its own
+    beyond = np.zeros(3)
+    for i in range(n - 1, -1, -1):
+        lever_force[i] = beyond + 0.5 * grad_c[i]
+        beyond += grad_c[i]
+    gradient = np.empty(n)
+    for i in range(n):
+        gradient[i] = grad_m[i] @ z_m[i] + lengths[i] * (lever_force[i] @ z_u[i])
+    hess = np.empty((n if want_hessian else 0, n if want_hessian else 0))
+    if not want_hessian:
+        return gradient, hess
+    jt_h = np.empty((n, 6 * n))          # J^T H_xx, row by row of H_xx (it is symmetric)
+    for r in range(6 * n):
+        _times_jacobian(hess_x[r], lengths, z_m, z_u, jt_h[:, r])
+    for i in range(n):
+        _times_jacobian(jt_h[i], lengths, z_m, z_u, hess[i])
+    for i in range(n):
+        for k in range(i):
+            hess[i, k] = hess[k, i] = 0.5 * (hess[i, k] + hess[k, i])
+        # The second derivatives of m_i and c_i: z x (z x v) = -v in the plane.
+        m_perp = moments[i] - (moments[i] @ z) * z
+        hess[i, i] -= grad_m[i] @ m_perp + lengths[i] * (lever_force[i] @ u[i])
+    return gradient, hess
+
+
+@numba.njit(cache=True)
+def _times_jacobian(row, lengths, z_m, z_u, out):
+    """Write row (6n,) times J (6n, n) into out (n,): see _projected."""
+    n = z_m.shape[0]
+    b0 = b1 = b2 = 0.0                   # the row's centre entries summed over links i+1 ..
+    for i in range(n - 1, -1, -1):
+        m, c = 3 * i, 3 * n + 3 * i
+        out[i] = (row[m] * z_m[i, 0] + row[m + 1] * z_m[i, 1] + row[m + 2] * z_m[i, 2]
+                  + lengths[i] * ((b0 + 0.5 * row[c]) * z_u[i, 0]
+                                  + (b1 + 0.5 * row[c + 1]) * z_u[i, 1]
+                                  + (b2 + 0.5 * row[c + 2]) * z_u[i, 2]))
+        b0 += row[c]
+        b1 += row[c + 1]
+        b2 += row[c + 2]
+
+
+@numba.njit(cache=True)
+def _cross(a, b):
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                     a[0] * b[1] - a[1] * b[0]])
 
 
 # -- linearised small-angle model: sin t ~ t, cos t ~ 1 - t^2 / 2 in loads and kinematics ----

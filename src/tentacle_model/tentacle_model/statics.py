@@ -30,7 +30,7 @@ import time
 import numpy as np
 from scipy.linalg import eigh, eigh_tridiagonal, LinAlgError, solveh_banded
 from scipy.linalg.lapack import dpotrf as potrf, dpotrs as potrs, dptsv as ptsv
-from tentacle_model import dipoles, link_loads, planar, planar_newton, spatial, spatial_newton
+from tentacle_model import link_loads, planar, planar_newton, spatial, spatial_newton
 from tentacle_model.chain import Chain, MAX_CHAIN_LINKS, ProblemTooLarge
 from tentacle_model.dipoles import Contact
 from threadpoolctl import ThreadpoolController
@@ -79,8 +79,11 @@ MAX_LINKS first (26 MiB).
 """
 _BYTES_PER_LINK = 256  # the chain's arrays (11 doubles a link) and the solver's vectors
 _DENSE_COPIES = 6  # live copies of a dense Hessian: two evaluations, factor, eigh, shifted
-_DIPOLE_BYTES_PER_PAIR = 720  # dipoles.interaction's per-pair temporaries, (3, 3, p) and (3, p)
-_DIPOLE_COPIES = 5  # its (6n, 6n) Hessian, and four (6n, N) Jacobian-sized arrays
+# The interaction's (6n, 6n) Hessian and four (6n, N) arrays, and 720 bytes a pair: what the
+# numpy projection and pair loop of before kept. The compiled ones keep one (N, 6n) array and
+# 8 bytes a pair; the figures stay so that the limit, set by time, stays where it was measured.
+_DIPOLE_BYTES_PER_PAIR = 720
+_DIPOLE_COPIES = 5
 _BLAS = []  # the ThreadpoolController, made on first use (it inspects the loaded libraries)
 _COMPILED = []  # [True] once the compiled passes are ready (solve keeps them off its clock)
 
@@ -303,7 +306,12 @@ def compile_kernels():
     for minimiser, x in ((_Spatial(chain, np.zeros(3), np.zeros(3)), np.zeros(3)),
                          (_Planar(chain, np.zeros(3), np.zeros(3)), np.zeros(1))):
         _minimise_compiled(minimiser, x, 1e-9, 1, np.inf, np.inf)
-    dipoles.pair_interaction(np.zeros((2, 3)), np.eye(3)[:2], np.array([0]), np.array([1]))
+    two = Chain(np.ones(2), np.ones((2, 3)), np.ones((2, 3)), np.ones(2), np.ones(2),
+                np.zeros(3), np.eye(3), np.array([0, 1]))
+    loads = link_loads.of_chain(two, dipoles=True)
+    for hessian in (False, True):   # the interaction projected in both joint models
+        planar.project_loads(two, np.zeros(2), loads, hessian)
+        spatial.evaluate(two, np.zeros((2, 3)), np.zeros(3), hessian=hessian, loads=loads)
     spatial_newton.sensitivities(evaluation.rotations, evaluation.axes, evaluation.points_m,
                                  evaluation.distal_moments, evaluation.hessian, np.zeros(3),
                                  np.arange(3))
@@ -316,8 +324,8 @@ def estimate_memory_bytes(links, dof=1, dipole_pairs=0):
 
     Dense Hessians in the joint angles are (N, N) doubles with N = 3 n (3-DoF) or n (planar
     with dipoles: otherwise it is tridiagonal); the magnets' interaction adds its (6n, 6n)
-    Hessian in moments and centres, the Jacobian that maps it to the angles and per-pair
-    temporaries (up to n (n - 1) / 2 pairs). Measured peaks are 0.7 to 1.0 of this.
+    Hessian in moments and centres and more (_DIPOLE_COPIES: an over-estimate since the
+    projection was compiled, kept as the time limit's measure).
 
     :param links: number of links n
     :param dof: 1 (planar) or 3

@@ -79,6 +79,29 @@ def test_dipole_interaction_derivatives_match_finite_differences():
     np.testing.assert_allclose(hess, fd_hess, rtol=1e-5, atol=1e-6 * np.abs(fd_hess).max())
 
 
+def test_a_dense_link_load_projects_to_its_finite_differences(dense_load):
+    # At 20 links the projection's suffix sums over links must agree with the kinematics.
+    rng = np.random.default_rng(8)
+    n = 20
+    rotation = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    chain = Chain(rng.uniform(1e-3, 5e-3, n), np.zeros((n, 3)), rng.normal(0, 1e-3, (n, 3)),
+                  np.zeros(n), np.zeros(n), rng.normal(size=3), rotation)
+    loads = (dense_load(n, 9),)
+    theta = rng.uniform(-2, 2, n)
+    energy, grad, hess = planar.project_loads(chain, theta, loads)
+    eps = 1e-6
+    eye = np.eye(n)
+    fd_grad = [(planar.project_loads(chain, theta + eps * e, loads, False)[0]
+                - planar.project_loads(chain, theta - eps * e, loads, False)[0]) / (2 * eps)
+               for e in eye]
+    np.testing.assert_allclose(grad, fd_grad, rtol=1e-6, atol=1e-7 * np.abs(fd_grad).max())
+    fd_hess = np.array([(planar.project_loads(chain, theta + eps * e, loads, False)[1]
+                         - planar.project_loads(chain, theta - eps * e, loads, False)[1])
+                        / (2 * eps) for e in eye])
+    np.testing.assert_allclose(hess, fd_hess, rtol=1e-6, atol=1e-7 * np.abs(fd_hess).max())
+    np.testing.assert_array_equal(hess, hess.T)
+
+
 @pytest.mark.parametrize('n', [1, 2, 7, 300])
 def test_smallest_eigenvalue_by_bisection_matches_lapack(n):
     from scipy.linalg import eigvalsh_tridiagonal

@@ -41,6 +41,29 @@ def test_gradient_and_hessian_match_finite_differences(seed):
     np.testing.assert_allclose(hess, fd_hess, rtol=1e-6, atol=1e-8 * np.abs(fd_hess).max())
 
 
+def test_a_dense_link_load_projects_to_its_finite_differences(dense_load):
+    # At 20 links the projection's suffix sums over links must agree with the kinematics.
+    chain, rng = random_chain(20, 4)
+    loads = (dense_load(20, 5),)
+    q = rng.uniform(-1, 1, (20, 3))
+
+    def state(q, hessian=False):
+        return spatial.evaluate(chain, q, np.zeros(3), hessian=hessian, loads=loads)
+
+    eps = 1e-6
+    basis = np.eye(60).reshape(60, 20, 3)
+    fd_grad = np.array([(state(q + eps * e).energy_j - state(q - eps * e).energy_j)
+                        / (2 * eps) for e in basis]).reshape(20, 3)
+    full = state(q, True)
+    np.testing.assert_allclose(full.gradient, fd_grad, rtol=1e-6,
+                               atol=1e-7 * np.abs(fd_grad).max())
+    fd_hess = np.column_stack([((state(q + eps * e).gradient - state(q - eps * e).gradient)
+                                / (2 * eps)).reshape(-1) for e in basis])
+    np.testing.assert_allclose(full.hessian, fd_hess, rtol=1e-6,
+                               atol=1e-7 * np.abs(fd_hess).max())
+    np.testing.assert_array_equal(full.hessian, full.hessian.T)
+
+
 def test_gravity_energy_is_the_height_of_the_centres_of_mass():
     chain, rng = random_chain(5, 7)
     q = rng.uniform(-1, 1, (5, 3))

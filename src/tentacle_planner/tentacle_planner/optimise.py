@@ -33,7 +33,7 @@ import signal
 import numpy as np
 from scipy.optimize import least_squares, minimize
 from tentacle_model import spatial, statics
-from tentacle_planner import step_residuals
+from tentacle_planner import step_residuals, unknowns
 from tentacle_planner.clearance import gap_arrays, link_gap_gradients, link_gaps
 from tentacle_planner.step_residuals import FAILED_RESIDUAL
 from threadpoolctl import threadpool_limits
@@ -158,6 +158,17 @@ class Problem:
         self.angles_per_segment = 1 if constraints.planar_magnetisation else 2
         self.field_size = 2 if model.dof == 1 else 3
         self.base_plane = model.spec.base_rotation[:, :2]
+        # unpack's and the neighbour rows' fixed arguments (unknowns.py)
+        self._held = np.zeros((len(model.spec.segments), 3))
+        for i in self.magnetised:
+            self._held[i] = (1.0, 0.0, 0.0) if self.fixed_directions is None else \
+                self.fixed_directions[i]
+        self._free = np.array(self.free_segments, dtype=np.intp)
+        column = {i: k * self.angles_per_segment for k, i in enumerate(self.free_segments)}
+        pairs = np.array(self._neighbour_pairs(), dtype=np.intp).reshape(-1, 2)
+        self._pairs = (pairs[:, 0].copy(), pairs[:, 1].copy(),
+                       *(np.array([column.get(i, -1) for i in side], dtype=np.intp)
+                         for side in pairs.T))
         # Each link's moment magnitude is fixed; its direction is its segment's.
         self._magnitudes = {s: np.linalg.norm(model.chain(s).moments_a_m2, axis=1)
                             for s in self.steps_m}
@@ -220,20 +231,14 @@ class Problem:
     def unpack(self, x):
         """Return (directions (segments, 3) link frame, fields (steps, 3) world T)."""
         x = np.asarray(x, dtype=float)
-        directions = np.zeros((len(self.model.spec.segments), 3))
-        for i in self.magnetised:
-            directions[i] = (1.0, 0.0, 0.0) if self.fixed_directions is None else \
-                self.fixed_directions[i]
-        k = 0
-        for i in self.free_segments:
-            azimuth = x[k]
-            elevation = 0.0 if self.angles_per_segment == 1 else x[k + 1]
-            directions[i] = _direction(azimuth, elevation)
-            k += self.angles_per_segment
+        return (unknowns.directions(x, self._held, self._free, self.angles_per_segment)[0],
+                self._fields(x))
+
+    def _fields(self, x):
+        """Return the fields (steps, 3) world T of unknowns x (an array)."""
+        k = len(self.free_segments) * self.angles_per_segment
         fields = x[k:].reshape(len(self.steps_m), self.field_size) * MILLITESLA
-        if self.field_size == 2:
-            fields = fields @ self.base_plane.T
-        return directions, fields
+        return fields @ self.base_plane.T if self.field_size == 2 else fields
 
     def pack(self, directions, fields_t):
         """Return x for directions (segments, 3) and fields (steps, 3) (inverse of unpack)."""
@@ -336,19 +341,13 @@ class Problem:
 
     def _compiled_residuals(self, x, jacobian):
         """Return residuals' (r, J) by the compiled key step (step_residuals.py)."""
-        directions, fields = self.unpack(x)
+        x = np.asarray(x, dtype=float)
+        directions, derivatives = unknowns.directions(x, self._held, self._free,
+                                                      self.angles_per_segment)
+        fields = self._fields(x)
         n_dir = len(self.free_segments) * self.angles_per_segment
-        derivatives = np.zeros((len(directions), self.angles_per_segment, 3))
-        azimuths = x[:n_dir:self.angles_per_segment]
-        elevations = x[1:n_dir:2] if self.angles_per_segment == 2 else np.zeros(len(azimuths))
-        ca, sa, ce, se = np.cos(azimuths), np.sin(azimuths), np.cos(elevations), \
-            np.sin(elevations)
-        derivatives[self.free_segments, 0] = np.column_stack([-ce * sa, ce * ca,
-                                                              np.zeros_like(ca)])
-        if self.angles_per_segment == 2:
-            derivatives[self.free_segments, 1] = np.column_stack([-se * ca, -se * sa, ce])
         first, field_map, offsets = self._columns
-        neighbours, d_neighbours = self._neighbour_rows(x, directions)
+        neighbours, d_neighbours = self._neighbour_rows(x, directions, derivatives)
         r = np.zeros(offsets[-1] + len(neighbours))
         jac = np.zeros((len(r), self.size) if jacobian else (0, 0))
         state = None if self.start is None else np.asarray(self.start[0], dtype=float)
@@ -387,32 +386,25 @@ class Problem:
         return [(a, b) for a, b in zip(self.magnetised, self.magnetised[1:])
                 if a + 1 == b and {a, b} & free]
 
-    def _neighbour_rows(self, x, directions):
+    def _neighbour_rows(self, x, directions, derivatives=None, limit=None):
         """
         Return (r, dr/dx): the neighbour-angle limit as residuals, ahead of its SLSQP polish.
 
         One per pair: neighbour_weight (cos limit - d_a . d_b) where the pair is further
         apart than the limit, else 0, so that least squares stays near the limit and SLSQP
         (fit) has only a small step left to keep it exactly.
+
+        :param derivatives: unknowns.directions' second answer at x, if the caller has it
+        :param limit: rad, in place of the constraints' (None: theirs)
         """
-        limit = self.constraints.max_neighbour_angle_rad
-        pairs = [] if limit is None else self._neighbour_pairs()
-        r, jac = np.zeros(len(pairs)), np.zeros((len(pairs), self.size))
-        column = {i: k * self.angles_per_segment for k, i in enumerate(self.free_segments)}
-        for row, (a, b) in enumerate(pairs):
-            excess = math.cos(limit) - directions[a] @ directions[b]
-            if excess <= 0:
-                continue
-            r[row] = self.neighbour_weight * excess
-            for this, other in ((a, b), (b, a)):
-                if this in column:
-                    k = column[this]
-                    elevation = 0.0 if self.angles_per_segment == 1 else x[k + 1]
-                    derivatives = _direction_derivatives(x[k], elevation)
-                    for j in range(self.angles_per_segment):
-                        jac[row, k + j] = -self.neighbour_weight * (directions[other]
-                                                                    @ derivatives[j])
-        return r, jac
+        limit = self.constraints.max_neighbour_angle_rad if limit is None else limit
+        if limit is None:
+            return np.zeros(0), np.zeros((0, self.size))
+        if derivatives is None:
+            derivatives = unknowns.directions(np.asarray(x, dtype=float), self._held,
+                                              self._free, self.angles_per_segment)[1]
+        return unknowns.neighbour_rows(directions, derivatives, *self._pairs,
+                                       math.cos(limit), self.neighbour_weight, self.size)
 
     def _field_columns(self, d_field, scale):
         """Return d points / d this step's field unknowns from d points / d field (T)."""

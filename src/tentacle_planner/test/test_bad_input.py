@@ -254,17 +254,20 @@ def test_a_short_path_goes_into_the_schedule_whole():
 
 
 # -- Ctrl-C ------------------------------------------------------------------------------
-def interrupt(module, name, after=0):
-    """Make module.name raise KeyboardInterrupt on its call number after + 1."""
+def interrupt(module, name, after=0, armed=lambda: True):
+    """Make module.name raise KeyboardInterrupt on its call number after + 1 once armed()."""
     original = getattr(module, name)
     calls = []
 
     def wrapper(*args, **kwargs):
-        calls.append(1)
-        if len(calls) > after:
+        calls.append(armed())
+        if sum(calls) > after:
             raise KeyboardInterrupt
         return original(*args, **kwargs)
     return name, wrapper
+
+
+AFTER_THE_ROBUST_PLAN = 'the first call once the robust plan is made'
 
 
 def previous_run(out):
@@ -296,8 +299,8 @@ PHASES = [
     ('the polish in the finer model (its re-check first)', planner, 'recheck', 0, {}, [],
      True, 'interrupted: left out the polish in the finer model, the robustness report, '
      'the re-check in fuller models'),
-    # (the polish's re-check serves a plan it leaves as it was: a robust plan is checked anew)
-    ('the re-check', planner, 'recheck', 1, {}, ['--robust'], True,
+    # (the polish's re-check serves the nominal plan: a robust plan is checked anew)
+    ('the re-check', planner, 'recheck', AFTER_THE_ROBUST_PLAN, {}, ['--robust'], True,
      'interrupted: left out the re-check in fuller models'),
     ('writing the schedule', schedule, 'schedule_document', 0, {}, [], False, None),
 ]
@@ -310,7 +313,13 @@ def test_ctrl_c_in_every_phase_exits_130_with_the_best_plan_so_far(
         flag):
     scene, out = arc_scene(tmp_path, **extra), tmp_path / 'out'
     previous_run(out)
-    monkeypatch.setattr(module, *interrupt(module, name, after))
+    if after == AFTER_THE_ROBUST_PLAN:   # however many re-checks the polish made before it
+        made, robust = [], planner.RobustProblem
+        monkeypatch.setattr(planner, 'RobustProblem',
+                            lambda *args: made.append(True) or robust(*args))
+        monkeypatch.setattr(module, *interrupt(module, name, 0, armed=lambda: bool(made)))
+    else:
+        monkeypatch.setattr(module, *interrupt(module, name, after))
     code, printed, err, _ = run(['--scene', scene, '--out', out, *QUICK, *options], capsys)
     assert code == 130, err
     assert 'Traceback' not in err

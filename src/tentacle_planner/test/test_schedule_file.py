@@ -1,5 +1,6 @@
 """Schedules read back: typed, self-contained, strict, and fast to load (no scipy)."""
 
+from dataclasses import replace
 import pathlib
 import subprocess
 import sys
@@ -18,17 +19,20 @@ ROOT = pathlib.Path(__file__).resolve().parents[3]
 
 @pytest.fixture(scope='module')
 def planned(tmp_path_factory):
-    """Return (schedule path, its document, scene): a quick plan of a shipped scene."""
+    """Return (schedule path, its document, scene, result): a quick plan of a shipped scene."""
     scene = load_scene(ROOT / 'config' / 'scenes' / 'pancreatic_duct.yaml')
     result = plan_scene(scene, starts=1, iterations=5)
     path = write_schedule_file(tmp_path_factory.mktemp('plan'), result)
-    return path, yaml.safe_load(path.read_text()), scene
+    return path, yaml.safe_load(path.read_text()), scene, result
 
 
 def test_a_written_schedule_reads_back_as_written(planned):
-    path, document, scene = planned
+    path, document, scene, result = planned
     schedule = read_schedule(path)
-    assert schedule.model == scene.model   # the planning model travels with the plan
+    # the model the plan was made in travels with it: the scene's, with the polish's sub-links
+    assert schedule.model == result.planning_model
+    assert schedule.model.sublinks > scene.model.sublinks
+    assert replace(schedule.model, sublinks=scene.model.sublinks) == scene.model
     assert schedule.scene_name == scene.name and schedule.scene_sha256 == scene.sha256
     assert len(schedule.steps) == len(document['steps'])
     for step, raw in zip(schedule.steps, document['steps']):

@@ -183,7 +183,7 @@ def lab_settings(scene, seeds):
     best = min(r[2] for _, _, runs in rows for r in runs)
     met = default[0] <= TARGET_S and default[2] <= 1.1 * exhaustive[2]
     print(f'  target: the default in {default[0]:.2f} s (<= {TARGET_S:g} s) re-checked at '
-          f'{100 * default[2]:.2f}% of L, within 10% of the exhaustive search\'s '
+          f'{100 * default[2]:.2f}% of L, within 10% of the exhaustive search at '
           f'{100 * exhaustive[2]:.2f}% (per seed a median {paired:.2f} x it; the least of any '
           f'run {100 * best:.2f}%): ' + ('met' if met else 'NOT MET'))
 

@@ -1,0 +1,165 @@
+"""
+Many equilibria of one chain in one compiled pass: its magnets' directions and the field vary.
+
+A design study (tentacle_studies) solves the same chain at thousands of points that differ
+only in each segment's magnetisation direction and the uniform field. One statics.solve a
+point costs 0.15-0.25 ms of Python around a compiled Newton of tens of microseconds; here the
+loop over the points is compiled too, and each point starts from the one before (its
+neighbour along the grid), so a solve is a few Newton steps.
+
+The same minimisers as statics.solve (spatial_newton.minimise, planar_newton.minimise), the
+same tolerance and limits: a point solved here from a state is the point statics.solve finds
+from that state (tested). Where several stable equilibria exist, the warm start follows the
+branch along the points, as a rig sweeping its field would; a point after one that did not
+converge starts straight. Chains with the magnets' interaction are not batched (their loads
+are Python callables): solve them one by one.
+"""
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+from tentacle_model import compiled_cache, planar, planar_newton, spatial, spatial_newton, statics
+from tentacle_model.planar import evaluate as planar_evaluate, smallest_eigenvalue
+from tentacle_model.spatial import _evaluate
+
+compiled_cache.fresh(__file__, planar, planar_newton, spatial, spatial_newton)
+
+
+@dataclass(frozen=True)
+class Batch:
+    """Equilibria at P points; world frame, SI units."""
+
+    tips_m: np.ndarray        # (P, 3) the tip
+    converged: np.ndarray     # (P,) bool
+    stability: np.ndarray     # (P,) smallest Hessian eigenvalue, N m / rad^2 (nan: unknown)
+    iterations: np.ndarray    # (P,) Newton steps
+
+    @property
+    def stable(self):
+        """Return (P,) bool: converged with a positive definite Hessian."""
+        return self.converged & (self.stability > 0)
+
+
+def solve(chain, directions, fields_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=3, tol=1e-9,
+          max_iterations=200, initial=None):
+    """
+    Return the Batch of a chain's equilibria at P points, each warm-started from the last.
+
+    :param chain: a Chain without interacting magnets (chain.py); its moments' magnitudes
+        are kept, their directions come from ``directions``
+    :param directions: (P, segments, 3) each segment's magnetisation direction per point,
+        link frame (unit vectors; zero rows for passive segments); segments as the chain's
+        segment_index numbers them (without one, each link is a segment)
+    :param fields_t: (P, 3) the uniform field per point, tesla, world frame
+    :param dof: 1 (planar joints) or 3
+    :param initial: the first point's start, as statics.solve takes it (default straight)
+    :raises ValueError: arrays of the wrong shape or not finite
+    """
+    directions = np.ascontiguousarray(directions, dtype=float)
+    fields = np.ascontiguousarray(fields_t, dtype=float)
+    count = len(fields)
+    # None: every link a magnet of its own (chain.py)
+    index = np.arange(chain.size) if chain.segment_index is None else chain.segment_index
+    segments = int(index.max()) + 1 if chain.size else 0
+    if fields.shape != (count, 3) or directions.shape != (count, segments, 3):
+        raise ValueError(f'directions {directions.shape} and fields {fields.shape}: expected '
+                         f'(P, {segments}, 3) and (P, 3)')
+    if not (np.all(np.isfinite(directions)) and np.all(np.isfinite(fields))):
+        raise ValueError('directions and fields must be finite')
+    if dof not in (1, 3):
+        raise ValueError(f'dof {dof} is not 1 or 3')
+    gravity = np.asarray(gravity_m_s2, dtype=float)
+    statics.check_size(chain.size, dof)
+    statics.compile_kernels()
+    magnitudes = np.linalg.norm(chain.moments_a_m2, axis=1)
+    shape = chain.size * (3 if dof == 3 else 1)
+    start = np.zeros(shape) if initial is None else np.asarray(initial, float).reshape(-1)
+    if start.shape != (shape,):
+        raise ValueError(f'initial angles of {start.size} values for {shape} unknowns')
+    newton = np.array([statics.MAX_STEP_RAD, statics.MAX_SADDLE_ESCAPES,
+                       statics.ESCAPE_STEP_RAD])
+    arguments = (chain.base_rotation, chain.base_position_m, chain.lengths_m, magnitudes,
+                 index.astype(np.intp), spatial.gravity_levers(chain),
+                 chain.stiffness_n_m, directions, fields, gravity, tol, int(max_iterations),
+                 newton, start)
+    kernel = _spatial_points if dof == 3 else _planar_points
+    return Batch(*kernel(*arguments))
+
+
+@numba.njit(cache=True)
+def _moments(magnitudes, segment_index, directions):
+    moments = np.empty((magnitudes.shape[0], 3))
+    for link in range(magnitudes.shape[0]):
+        moments[link] = magnitudes[link] * directions[segment_index[link]]
+    return moments
+
+
+@numba.njit(cache=True)
+def _spatial_points(base_rotation, base_position, lengths, magnitudes, segment_index, levers,
+                    stiffness, directions, fields, gravity, tol, max_iterations, newton, start):
+    """Solve every point with the 3-DoF joints: see solve."""
+    count, n = fields.shape[0], lengths.shape[0]
+    tips, converged = np.empty((count, 3)), np.zeros(count, dtype=np.bool_)
+    stability, iterations = np.full(count, np.nan), np.zeros(count, dtype=np.int64)
+    k_floor = max(1e-9 * np.max(stiffness), 1e-300)
+    x = start.copy()
+    for p in range(count):
+        moments = _moments(magnitudes, segment_index, directions[p])
+        x, status, used, _, _, lowest = spatial_newton.minimise(
+            x, base_rotation, base_position, lengths, moments, levers, stiffness, fields[p],
+            gravity, tol, k_floor, max_iterations, 0, 0, max_iterations + 1, newton[0],
+            int(newton[1]), newton[2])
+        state = _evaluate(x.reshape(n, 3), base_rotation, base_position, lengths, moments,
+                          levers, stiffness, fields[p], gravity,
+                          status == spatial_newton.AT_ROUND_OFF)
+        tips[p] = state[2][n]
+        iterations[p] = used
+        if status == spatial_newton.CONVERGED:
+            converged[p], stability[p] = True, lowest
+        elif status == spatial_newton.AT_ROUND_OFF:
+            converged[p], stability[p] = True, np.linalg.eigvalsh(state[5])[0]
+        if not (converged[p] and np.all(np.isfinite(x))):
+            x = np.zeros(3 * n)   # the next point starts straight
+    return tips, converged, stability, iterations
+
+
+@numba.njit(cache=True)
+def _planar_points(base_rotation, base_position, lengths, magnitudes, segment_index, levers,
+                   stiffness, directions, fields, gravity, tol, max_iterations, newton, start):
+    """Solve every point with the planar joints (planar.loads per point): see solve."""
+    count, n = fields.shape[0], lengths.shape[0]
+    tips, converged = np.empty((count, 3)), np.zeros(count, dtype=np.bool_)
+    stability, iterations = np.full(count, np.nan), np.zeros(count, dtype=np.int64)
+    k = stiffness[:, 0].copy()
+    k_floor = max(1e-9 * np.max(k), 1e-300)
+    axis_x, axis_y = base_rotation[:, 0].copy(), base_rotation[:, 1].copy()
+    gx, gy = axis_x @ gravity, axis_y @ gravity
+    x = start.copy()
+    a, b = np.empty(n), np.empty(n)
+    for p in range(count):
+        moments = _moments(magnitudes, segment_index, directions[p])
+        bx, by = axis_x @ fields[p], axis_y @ fields[p]
+        load_scale = 0.0
+        for i in range(n):   # planar.loads
+            a[i] = moments[i, 0] * bx + moments[i, 1] * by + levers[i] * gx
+            b[i] = moments[i, 0] * by - moments[i, 1] * bx + levers[i] * gy
+            load_scale = max(load_scale, abs(a[i]) + abs(b[i]))
+        x, status, used, _, _, lowest = planar_newton.minimise(
+            x, k, a, b, load_scale, tol, k_floor, max_iterations, 0, 0, max_iterations + 1,
+            newton[0], int(newton[1]), newton[2])
+        tip = base_position.copy()
+        for i in range(n):
+            c, s = np.cos(x[i]), np.sin(x[i])
+            tip += lengths[i] * (c * axis_x + s * axis_y)
+        tips[p] = tip
+        iterations[p] = used
+        if status == spatial_newton.CONVERGED:
+            converged[p], stability[p] = True, lowest
+        elif status == spatial_newton.AT_ROUND_OFF:
+            banded = planar_evaluate(x, k, a, b, False, True)[2]
+            converged[p] = True
+            stability[p] = smallest_eigenvalue(banded[1], banded[0, 1:])
+        if not (converged[p] and np.all(np.isfinite(x))):
+            x = np.zeros(n)
+    return tips, converged, stability, iterations

@@ -1,0 +1,51 @@
+"""Equilibria in batch: each point the equilibrium statics.solve finds from the same start."""
+
+import numpy as np
+import pytest
+from tentacle_model import batch
+from tentacle_model.model import TentacleModel
+
+
+def sweep(spec, count, seed):
+    """Return (directions (P, segments, 3), fields (P, 3)): turning magnets, a varying field."""
+    rng = np.random.default_rng(seed)
+    segments = len(spec.segments)
+    angles = np.cumsum(rng.normal(0.0, 0.4, (count, segments)), axis=0)  # a walk: neighbours
+    directions = np.stack([np.cos(angles), np.sin(angles), np.zeros_like(angles)], axis=-1)
+    magnetised = [np.linalg.norm(s.magnetisation_a_per_m) > 0 for s in spec.segments]
+    directions[:, ~np.array(magnetised)] = 0.0
+    fields = rng.normal(0.0, 4e-3, (count, 3))
+    return directions, fields
+
+
+@pytest.mark.parametrize('dof', [1, 3])
+def test_every_point_is_the_equilibrium_solve_finds_from_the_last(braided, dof):
+    model = TentacleModel(braided, dof=dof, sublinks=2, gravity_m_s2=[0.0, 0.0, -9.81])
+    chain = model.chain(braided.length_m)
+    directions, fields = sweep(braided, 40, dof)
+    if dof == 1:
+        fields[:, 2] = 0.0
+    got = batch.solve(chain, directions, fields, model.gravity_m_s2, dof=dof,
+                      tol=model.tol, max_iterations=model.max_iterations)
+    magnitudes = np.linalg.norm(chain.moments_a_m2, axis=1)
+    state = None
+    for p in range(len(fields)):
+        moments = magnitudes[:, None] * directions[p][chain.segment_index]
+        solution = model.solve(braided.length_m, fields[p], state, moments)
+        eq = solution.equilibrium
+        assert got.converged[p] == eq.converged
+        np.testing.assert_allclose(got.tips_m[p], eq.points_m[-1], rtol=0, atol=1e-12)
+        assert got.stability[p] == pytest.approx(eq.stability, rel=1e-9, abs=1e-15)
+        assert got.iterations[p] == eq.iterations
+        state = solution.state if eq.converged else None
+    assert got.converged.all() and got.stable.any()
+    assert np.ptp(got.tips_m[:, 1]) > 0.2 * braided.length_m   # the points differ
+
+
+def test_refuses_what_it_cannot_solve(braided):
+    chain = TentacleModel(braided, dof=3).chain(braided.length_m)
+    segments = len(braided.segments)
+    with pytest.raises(ValueError, match='expected'):
+        batch.solve(chain, np.zeros((2, segments + 1, 3)), np.zeros((2, 3)))
+    with pytest.raises(ValueError, match='finite'):
+        batch.solve(chain, np.zeros((1, segments, 3)), np.full((1, 3), np.nan))

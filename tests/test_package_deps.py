@@ -17,10 +17,13 @@ from rig_support import ROOT
 
 IMPORT_KEYS = {  # import name -> rosdep key
     'cv2': 'python3-opencv',
+    'dask': 'python3-dask',
+    'distributed': 'python3-distributed',
     'hypothesis': 'python3-hypothesis',
     'matplotlib': 'python3-matplotlib',
     'numba': 'python3-numba',
     'numpy': 'python3-numpy',
+    'pyarrow': 'python3-pyarrow',
     'pytest': 'python3-pytest',
     'scipy': 'python3-scipy',
     'serial': 'python3-serial',

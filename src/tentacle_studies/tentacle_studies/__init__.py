@@ -1,0 +1,1 @@
+"""Design studies: study files, equilibria in batch, results tables (pure, no rclpy)."""

@@ -1,0 +1,57 @@
+"""
+Where a study's chunks are computed: in this process, or on a Dask cluster (local or remote).
+
+A chunk is some thousands of points solved in one compiled pass: tens of milliseconds to
+seconds, well above Dask's task overhead (0.2-1 ms: ../shared/NOTES.md section 13), so one
+task a chunk. This machine's cores are a LocalCluster of one single-threaded worker process
+a core; a lab's cluster is the same code with its scheduler's address. Either way the
+chunks, and so the results, are the same: each chunk's first point starts straight.
+"""
+
+import contextlib
+import os
+
+from tentacle_studies.equilibria import solve_points
+
+
+def local_cores():
+    """Return the cores this process may run on."""
+    return len(os.sched_getaffinity(0))
+
+
+@contextlib.contextmanager
+def in_process():
+    """Yield compute(study, bounds) -> iterator of (index, columns) as chunks complete."""
+    def compute(study, bounds):
+        for index, (start, stop) in bounds.items():
+            yield index, solve_points(study, start, stop)
+    yield compute
+
+
+@contextlib.contextmanager
+def dask(address=None, workers=None):
+    """
+    Yield compute() as in_process, on a Dask cluster.
+
+    :param address: a scheduler's address (tcp://host:port); None: a LocalCluster of
+        ``workers`` single-threaded processes (default: local_cores())
+    """
+    from distributed import as_completed, Client, LocalCluster
+    with contextlib.ExitStack() as stack:
+        if address is None:
+            cluster = stack.enter_context(LocalCluster(
+                n_workers=workers or local_cores(), threads_per_worker=1, processes=True,
+                dashboard_address=None))
+            address = cluster.scheduler_address
+        client = stack.enter_context(Client(address))
+
+        def compute(study, bounds):
+            shared = client.scatter(study, broadcast=True)
+            futures = {client.submit(solve_points, shared, start, stop, pure=False): index
+                       for index, (start, stop) in bounds.items()}
+            try:
+                for future in as_completed(futures):
+                    yield futures[future], future.result()
+            finally:
+                client.cancel(list(futures))   # Ctrl-C: nothing left running on the cluster
+        yield compute

@@ -1,0 +1,41 @@
+"""The equilibria of a study's points, in batch (tentacle_model.batch): their table columns."""
+
+import numpy as np
+from tentacle_model import batch
+from tentacle_model.model import TentacleModel
+from tentacle_studies.study import AXES
+
+COLUMNS = ('tip_x_m', 'tip_y_m', 'tip_z_m', 'converged', 'stable', 'stability')
+
+
+def solve_points(study, start, stop):
+    """
+    Return {column: (k,) values} of points start..stop: the varied names, then COLUMNS.
+
+    The points are solved in order, each from the one before (the first straight): a chunk
+    of a grid is a run along its last name, so a solve is a few Newton steps.
+    """
+    spec = study.tentacle
+    model = TentacleModel(spec, dof=study.dof, sublinks=study.sublinks,
+                          gravity_m_s2=study.gravity_m_s2)
+    chain = model.chain(study.inserted_m)
+    points = study.points(start, stop)
+    count = len(next(iter(points.values())))
+    own = np.array([s.magnetisation_a_per_m / max(np.linalg.norm(s.magnetisation_a_per_m),
+                                                  1e-300) for s in spec.segments])
+    directions = np.repeat(own[None], count, axis=0)
+    fields = np.repeat(study.field_t[None], count, axis=0)
+    for name, values in points.items():
+        kind, _, which = name.partition('.')
+        if kind == 'magnetisation_deg':
+            angle = np.radians(values)
+            directions[:, int(which)] = np.column_stack([np.cos(angle), np.sin(angle),
+                                                         np.zeros(count)])
+        else:
+            fields[:, AXES[which]] = values
+    solved = batch.solve(chain, directions, fields, model.gravity_m_s2, dof=model.dof,
+                         tol=model.tol, max_iterations=model.max_iterations)
+    tips = solved.tips_m
+    return {**points, 'tip_x_m': tips[:, 0], 'tip_y_m': tips[:, 1], 'tip_z_m': tips[:, 2],
+            'converged': solved.converged, 'stable': solved.stable,
+            'stability': solved.stability}

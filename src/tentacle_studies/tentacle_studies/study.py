@@ -1,0 +1,227 @@
+"""
+A design study file (../shared/DESIGN.md, "Design studies"): what is fixed, what varies, where.
+
+    name: ch2_babble
+    compute: equilibrium              # or plan (then `scene:` instead of `tentacle:`)
+    tentacle: ../tentacles/chapter2.yaml
+    inserted_m: 0.042                 # optional: all
+    field_t: [0.0, 0.005, 0.0]        # unless varied
+    model: {dof: 1, sublinks: 8}
+    vary:                             # a grid {from, to, count} or a list of values
+      magnetisation_deg.0: {from: 0, to: 345, count: 24}
+      field_t.y: [0.0, 0.005, 0.010]
+    sample: grid                      # or {latin_hypercube: N, seed: S} or {random: N, seed: S}
+
+Varied names: ``magnetisation_deg.K`` (segment K's magnetisation direction, at that angle in
+its link x-y plane, deg, with the tentacle file's remanence) and ``field_t.x``, ``.y``,
+``.z`` (tesla, world frame). A grid is every combination, the last name varying fastest, so
+that neighbouring points are warm starts for each other; a Latin hypercube or random sample
+draws N points: a range uniformly between its ends (its count is the grid's only), a list
+one of its values.
+"""
+
+from dataclasses import dataclass
+import hashlib
+import math
+import pathlib
+
+import numpy as np
+from scipy.stats import qmc
+from tentacle_model.tentacle_spec import load_tentacle, SpecError
+from tentacle_model.user_files import FieldReader, load_yaml, read_capped
+import yaml
+
+MAX_FILE_BYTES = 64 * 1024
+MAX_POINTS = 10_000_000   # a study's points; each needs its row of every column in memory
+AXES = {'x': 0, 'y': 1, 'z': 2}
+
+
+class StudyError(ValueError):
+    """A study file that cannot be run, naming the file and the key."""
+
+
+@dataclass(frozen=True)
+class Varied:
+    """One varied name: a range (low, high; count for a grid) or a list of values."""
+
+    name: str
+    values: tuple = None
+    low: float = None
+    high: float = None
+    count: int = None
+
+    def grid(self):
+        """Return the grid's values of this name (a range: count evenly spaced, ends in)."""
+        if self.values is not None:
+            return np.array(self.values, dtype=float)
+        return np.linspace(self.low, self.high, self.count)
+
+    def draw(self, u):
+        """Return the values at uniform draws u in [0, 1): along a range, or from a list."""
+        if self.values is not None:
+            index = np.minimum((u * len(self.values)).astype(np.int64), len(self.values) - 1)
+            return np.array(self.values, dtype=float)[index]
+        return self.low + u * (self.high - self.low)
+
+
+@dataclass(frozen=True)
+class Study:
+    """A validated study: the tentacle, what is fixed, what varies and how it is sampled."""
+
+    name: str
+    compute: str             # 'equilibrium'
+    source: pathlib.Path     # the study file
+    sha256: str              # of the study file's bytes: a resumed table must be its own
+    tentacle: object         # a TentacleSpec
+    inserted_m: float
+    field_t: np.ndarray      # (3,) unless varied, T
+    dof: int
+    sublinks: int
+    gravity_m_s2: np.ndarray
+    varied: tuple            # of Varied, in the file's order
+    sample: tuple            # ('grid', None, None) or (kind, count, seed)
+
+    @property
+    def names(self):
+        """Return the varied names, in the file's order: the table's first columns."""
+        return [v.name for v in self.varied]
+
+    @property
+    def size(self):
+        """Return the number of points."""
+        if self.sample[0] == 'grid':
+            return math.prod(len(v.grid()) for v in self.varied)
+        return self.sample[1]
+
+    def points(self, start=0, stop=None):
+        """
+        Return {name: (k,) values} of points start..stop (default all), in point order.
+
+        A grid's point i is its row-major (C) index over the names; a sample's are drawn
+        once from its seed, so any slice is the same whoever computes it.
+        """
+        stop = self.size if stop is None else min(stop, self.size)
+        index = np.arange(start, stop)
+        if self.sample[0] == 'grid':
+            grids = [v.grid() for v in self.varied]
+            place = np.unravel_index(index, [len(g) for g in grids])
+            return {v.name: g[i] for v, g, i in zip(self.varied, grids, place)}
+        u = self._draws()[start:stop]
+        return {v.name: v.draw(u[:, k]) for k, v in enumerate(self.varied)}
+
+    def _draws(self):
+        kind, count, seed = self.sample
+        if kind == 'latin_hypercube':
+            return qmc.LatinHypercube(d=len(self.varied), seed=seed).random(count)
+        return np.random.default_rng(seed).random((count, len(self.varied)))
+
+
+def load_study(path):
+    """
+    Read and validate a study file (relative paths are from its folder).
+
+    :raises StudyError: unreadable, not YAML, a key missing, unknown or invalid (named), its
+        tentacle file refused, or more than MAX_POINTS points
+    """
+    path = pathlib.Path(path)
+    data = read_capped(path, MAX_FILE_BYTES, StudyError, 'a study file')
+    try:
+        document = load_yaml(data.decode('utf-8'))
+    except UnicodeDecodeError as exc:
+        raise StudyError(f'{path}: not UTF-8 text ({exc.reason} at byte {exc.start})') \
+            from None
+    except yaml.YAMLError as exc:
+        raise StudyError(f'{path}: not valid YAML: {exc}') from None
+    reader = FieldReader(path, StudyError)
+    doc = reader.mapping(document, 'study', ('name', 'compute', 'tentacle', 'scene',
+                                             'inserted_m', 'field_t', 'model', 'vary',
+                                             'sample'), ('name', 'vary'))
+    compute = doc.get('compute', 'equilibrium')
+    if compute != 'equilibrium':
+        reader.fail('compute', f'{compute!r}: this version computes equilibria only '
+                               "('equilibrium')")
+    if 'tentacle' not in doc:
+        reader.fail('tentacle', 'an equilibrium study names its tentacle file')
+    try:
+        tentacle = load_tentacle(path.parent / str(doc['tentacle']))
+    except SpecError as exc:
+        reader.fail('tentacle', str(exc))
+    inserted = tentacle.length_m if doc.get('inserted_m') is None else reader.number(
+        doc['inserted_m'], 'inserted_m')
+    if inserted > tentacle.length_m * (1 + 1e-12):
+        reader.fail('inserted_m', f'{inserted:g} m is more than the tentacle '
+                                  f'({tentacle.length_m:g} m)')
+    field = reader.vector(doc.get('field_t', [0.0, 0.0, 0.0]), 'field_t')
+    model = reader.mapping(doc.get('model', {}), 'model', ('dof', 'sublinks', 'gravity_m_s2'))
+    dof = model.get('dof', 3)
+    if dof not in (1, 3) or isinstance(dof, bool):
+        reader.fail('model.dof', f'{dof!r} is not 1 or 3')
+    sublinks = model.get('sublinks', 1)
+    if isinstance(sublinks, bool) or not isinstance(sublinks, int) or not 1 <= sublinks <= 64:
+        reader.fail('model.sublinks', f'{sublinks!r} is not a whole number from 1 to 64')
+    gravity = reader.vector(model.get('gravity_m_s2', [0.0, 0.0, 0.0]), 'model.gravity_m_s2')
+    varied = _varied(reader, doc['vary'], tentacle)
+    sample = _sample(reader, doc.get('sample', 'grid'), varied)
+    study = Study(str(doc['name']), compute, path, hashlib.sha256(data).hexdigest(), tentacle,
+                  inserted, field, dof, sublinks, gravity, varied, sample)
+    if study.size > MAX_POINTS:
+        reader.fail('vary', f'{study.size} points: at most {MAX_POINTS}')
+    return study
+
+
+def _varied(reader, vary, tentacle):
+    """Return the Varied of a vary block, each name checked against the tentacle."""
+    if not isinstance(vary, dict) or not vary:
+        reader.fail('vary', 'expected a mapping of at least one name')
+    out = []
+    for name, spec in vary.items():
+        where = f'vary.{name}'
+        kind, _, which = str(name).partition('.')
+        if kind == 'magnetisation_deg':
+            if not which.isdigit() or int(which) >= len(tentacle.segments):
+                reader.fail(where, f'segment {which!r}: the tentacle has segments 0 to '
+                                   f'{len(tentacle.segments) - 1}')
+            if not np.any(tentacle.segments[int(which)].magnetisation_a_per_m):
+                reader.fail(where, f'segment {which} is not magnetised: nothing to turn')
+        elif kind != 'field_t' or which not in AXES:
+            reader.fail(where, 'unknown name: magnetisation_deg.K (segment K) or '
+                               'field_t.x, .y, .z')
+        if isinstance(spec, list):
+            if not spec:
+                reader.fail(where, 'an empty list')
+            out.append(Varied(str(name), tuple(reader.number(v, f'{where}[{i}]',
+                                                             positive=False)
+                                               for i, v in enumerate(spec))))
+            continue
+        spec = reader.mapping(spec, where, ('from', 'to', 'count'), ('from', 'to'))
+        count = spec.get('count')
+        if count is not None and (isinstance(count, bool) or not isinstance(count, int)
+                                  or count < 1):
+            reader.fail(f'{where}.count', f'{count!r} is not a whole number of at least 1')
+        out.append(Varied(str(name), None, reader.number(spec['from'], f'{where}.from', False),
+                          reader.number(spec['to'], f'{where}.to', False), count))
+    return tuple(out)
+
+
+def _sample(reader, sample, varied):
+    """Return ('grid', None, None) or (kind, count, seed) of a sample entry."""
+    if sample == 'grid':
+        for v in varied:
+            if v.values is None and v.count is None:
+                reader.fail(f'vary.{v.name}', 'a grid needs a count for a range')
+        return 'grid', None, None
+    if not isinstance(sample, dict) or len(sample) not in (1, 2):
+        reader.fail('sample', f'{sample!r}: grid, {{latin_hypercube: N, seed: S}} or '
+                              '{random: N, seed: S}')
+    kinds = [k for k in sample if k in ('latin_hypercube', 'random')]
+    if len(kinds) != 1:
+        reader.fail('sample', f'{sample!r}: grid, {{latin_hypercube: N, seed: S}} or '
+                              '{random: N, seed: S}')
+    reader.mapping(sample, 'sample', (kinds[0], 'seed'))
+    count, seed = sample[kinds[0]], sample.get('seed', 0)
+    for key, value, least in ((kinds[0], count, 1), ('seed', seed, 0)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < least:
+            reader.fail(f'sample.{key}', f'{value!r} is not a whole number of at least {least}')
+    if count > MAX_POINTS:
+        reader.fail(f'sample.{kinds[0]}', f'{count} points: at most {MAX_POINTS}')
+    return kinds[0], count, seed

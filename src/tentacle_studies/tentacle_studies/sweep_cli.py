@@ -1,0 +1,115 @@
+"""
+tentacle-sweep: run a design study file, writing its results table as chunks complete.
+
+    tentacle-sweep STUDY --out DIR [--resume] [--csv] [--chunk N] [--scheduler ADDRESS]
+                   [--workers N]
+
+DIR/results.parquet holds one row per point (results.py); Ctrl-C keeps every chunk
+finished and says how to continue (--resume computes only the chunks missing). --csv also
+writes DIR/results.csv once the table is whole. Chunks run on every local core (a Dask
+LocalCluster) for large studies, or on the Dask cluster at --scheduler (default: Dask's own
+``scheduler-address`` setting, e.g. DASK_SCHEDULER_ADDRESS), or here for small ones, one
+chunk or one worker: the same results wherever they run (engines.py). Exit 0 when every
+point is in the table, 2 on a refused study or folder, 130 on Ctrl-C.
+"""
+
+import argparse
+import sys
+import time
+
+import pyarrow.csv as pa_csv
+from tentacle_studies import engines
+from tentacle_studies.results import Results, ResultsError
+from tentacle_studies.study import load_study, StudyError
+from tqdm import tqdm
+
+DEFAULT_CHUNK_POINTS = 8000   # points a chunk: a file each, and what Ctrl-C may lose
+# Fewer points than this stay in this process unless --workers says otherwise: starting a
+# LocalCluster takes about 2 s, and this process solves some 38,000 points a second (5-link
+# 3-DoF tentacle; bench/sweep_scale.py).
+LOCAL_WORKERS_FROM_POINTS = 200_000
+
+
+def build_parser():
+    """Return the argument parser."""
+    parser = argparse.ArgumentParser(prog='tentacle-sweep', description=__doc__.split('\n')[1])
+    parser.add_argument('study', help='the study file (YAML, ../shared/DESIGN.md)')
+    parser.add_argument('--out', required=True, help='folder for results.parquet')
+    parser.add_argument('--resume', action='store_true',
+                        help="continue this study's table in --out: only missing chunks")
+    parser.add_argument('--csv', action='store_true', help='also write results.csv')
+    parser.add_argument('--chunk', type=int, default=DEFAULT_CHUNK_POINTS, metavar='N',
+                        help=f'points a chunk (default {DEFAULT_CHUNK_POINTS}; --resume '
+                             'needs the same as the first run)')
+    parser.add_argument('--scheduler', metavar='ADDRESS',
+                        help="a Dask scheduler's address, e.g. tcp://10.0.0.5:8786 (default: "
+                             "Dask's scheduler-address setting, else this machine)")
+    parser.add_argument('--workers', type=int, metavar='N',
+                        help='local worker processes (default: the cores this process may '
+                             'use; 1: in this process)')
+    return parser
+
+
+def engine(opts, chunks, points):
+    """Return (the engine's context manager, what it is) for chunks of points to compute."""
+    address = opts.scheduler
+    if address is None:
+        import dask   # its config: a lab sets the address once for every study
+        address = dask.config.get('scheduler-address', None)
+    if address:
+        return engines.dask(address), f'the Dask cluster at {address}'
+    workers = min(opts.workers or engines.local_cores(), chunks)
+    if workers <= 1 or (opts.workers is None and points < LOCAL_WORKERS_FROM_POINTS):
+        return engines.in_process(), 'this process'
+    return engines.dask(workers=workers), f'{workers} local worker processes'
+
+
+def main(args=None):
+    """Run the study; return the exit code."""
+    opts = build_parser().parse_args(args)
+    if opts.chunk < 1 or (opts.workers is not None and opts.workers < 1):
+        print('tentacle-sweep: --chunk and --workers must be at least 1', file=sys.stderr)
+        return 2
+    try:
+        study = load_study(opts.study)
+        results = Results(opts.out, study, opts.chunk, opts.resume)
+    except (StudyError, ResultsError) as exc:
+        print(f'tentacle-sweep: {exc}', file=sys.stderr)
+        return 2
+    except OSError as exc:   # the folder cannot be made or written
+        print(f'tentacle-sweep: cannot write results in {opts.out}: {exc}', file=sys.stderr)
+        return 2
+    missing = results.missing()
+    bounds = {index: results.bounds(index) for index in missing}
+    todo = sum(stop - start for start, stop in bounds.values())
+    running, where = engine(opts, len(missing), todo)
+    print(f'{study.name}: {study.size} points ({", ".join(study.names)}), {todo} to compute '
+          f'in {len(missing)} chunk(s) of up to {results.chunk_points} on {where}', flush=True)
+    t0 = time.perf_counter()
+    try:
+        with running as compute, tqdm(total=todo, unit='pt', desc=study.name,
+                                      file=sys.stderr) as bar:
+            for index, columns in compute(study, bounds):
+                results.write(index, columns)
+                bar.update(bounds[index][1] - bounds[index][0])
+    except KeyboardInterrupt:
+        done = study.size - sum(stop - start for start, stop in
+                                map(results.bounds, results.missing()))
+        print(f'\ntentacle-sweep: interrupted: {done} of {study.size} points are in '
+              f'{results.table_dir}; run again with --resume to compute the rest',
+              file=sys.stderr)
+        return 130
+    seconds = time.perf_counter() - t0
+    table = results.table()
+    if opts.csv:
+        pa_csv.write_csv(table, results.folder / 'results.csv')
+    converged = sum(table.column('converged').to_pylist())
+    stable = sum(table.column('stable').to_pylist())
+    print(f'{study.name}: {table.num_rows} points in {results.table_dir} ({todo} computed in '
+          f'{seconds:.1f} s, {todo / max(seconds, 1e-9):.0f} a second); {converged} '
+          f'converged, {stable} stable')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

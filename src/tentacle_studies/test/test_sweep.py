@@ -1,0 +1,162 @@
+"""tentacle-sweep: each row the model's equilibrium; chunks kept on Ctrl-C, resumed once."""
+
+import contextlib
+import json
+import os
+import pathlib
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from tentacle_model.model import TentacleModel
+from tentacle_studies import engines, sweep_cli
+from tentacle_studies.study import load_study
+
+STUDY = """name: two_magnets
+field_t: [0.0, 0.005, 0.0]
+model: {dof: 3, sublinks: 1, gravity_m_s2: [0.0, 0.0, -9.81]}
+vary:
+  magnetisation_deg.3: {from: 0, to: 330, count: 12}
+  magnetisation_deg.4: {from: 0, to: 330, count: 12}
+"""
+ROOT = pathlib.Path(__file__).resolve().parents[3]
+COLUMNS = ['magnetisation_deg.3', 'magnetisation_deg.4', 'tip_x_m', 'tip_y_m', 'tip_z_m',
+           'converged', 'stable', 'stability']
+
+
+def test_every_row_is_the_models_equilibrium_from_the_row_before(write_study, tmp_path):
+    path = write_study(STUDY)
+    assert sweep_cli.main([str(path), '--out', str(tmp_path / 'out'), '--chunk', '50',
+                           '--csv', '--workers', '1']) == 0
+    table = pq.read_table(tmp_path / 'out' / 'results.parquet')
+    assert table.column_names == COLUMNS and table.num_rows == 144
+    assert (tmp_path / 'out' / 'results.csv').read_text().count('\n') == 145
+    study = load_study(path)
+    model = TentacleModel(study.tentacle, dof=3, gravity_m_s2=study.gravity_m_s2)
+    chain = model.chain(study.inserted_m)
+    magnitudes = np.linalg.norm(chain.moments_a_m2, axis=1)
+    rows = table.to_pydict()
+    state = None
+    for p in range(144):
+        if p % 50 == 0:
+            state = None   # a chunk's first point starts straight
+        directions = np.array([s.magnetisation_a_per_m / max(np.linalg.norm(
+            s.magnetisation_a_per_m), 1e-300) for s in study.tentacle.segments])
+        for segment in (3, 4):
+            angle = np.radians(rows[f'magnetisation_deg.{segment}'][p])
+            directions[segment] = [np.cos(angle), np.sin(angle), 0.0]
+        solution = model.solve(study.inserted_m, study.field_t, state,
+                               magnitudes[:, None] * directions[chain.segment_index])
+        eq = solution.equilibrium
+        tip = [rows[f'tip_{axis}_m'][p] for axis in 'xyz']
+        np.testing.assert_allclose(tip, eq.points_m[-1], rtol=0, atol=1e-12)
+        assert rows['converged'][p] == eq.converged
+        assert rows['stable'][p] == (eq.converged and eq.stability > 0)
+        state = solution.state
+    assert all(rows['converged'])
+    assert np.ptp(rows['tip_y_m']) > 0.1 * study.tentacle.length_m
+
+
+def test_ctrl_c_keeps_the_chunks_done_and_resume_computes_the_rest(
+        write_study, tmp_path, monkeypatch, capsys):
+    path, out = write_study(STUDY), tmp_path / 'out'
+    solve, calls = engines.solve_points, []
+
+    def interrupted(study, start, stop):
+        calls.append((start, stop))
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return solve(study, start, stop)
+    monkeypatch.setattr(engines, 'solve_points', interrupted)
+    here = ['--chunk', '40', '--workers', '1']
+    assert sweep_cli.main([str(path), '--out', str(out), *here]) == 130
+    assert '40 of 144 points' in capsys.readouterr().err
+    assert pq.read_table(out / 'results.parquet').num_rows == 40   # the first chunk, whole
+    assert sweep_cli.main([str(path), '--out', str(out), *here]) == 2  # no --resume
+    calls.clear()
+    monkeypatch.setattr(engines, 'solve_points', lambda *a: calls.append(a[1:]) or solve(*a))
+    assert sweep_cli.main([str(path), '--out', str(out), *here, '--resume']) == 0
+    assert calls == [(40, 80), (80, 120), (120, 144)]   # only what was missing
+    resumed = pq.read_table(out / 'results.parquet')
+    assert sweep_cli.main([str(path), '--out', str(tmp_path / 'whole'), *here]) == 0
+    assert resumed.equals(pq.read_table(tmp_path / 'whole' / 'results.parquet'))
+
+
+def test_resume_refuses_another_studys_table(write_study, tmp_path, capsys):
+    out = tmp_path / 'out'
+    assert sweep_cli.main([str(write_study(STUDY)), '--out', str(out)]) == 0
+    other = write_study(STUDY.replace('count: 12', 'count: 6'), 'other.yaml')
+    assert sweep_cli.main([str(other), '--out', str(out), '--resume']) == 2
+    assert 'another study' in capsys.readouterr().err
+    assert pq.read_table(out / 'results.parquet').num_rows == 144   # untouched
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['--chunk', '0', '--out', 'o'], '--chunk and --workers must be'),
+    (['--workers', '0', '--out', 'o'], '--chunk and --workers must be'),
+    (['--out', '/dev/null/x'], 'cannot write results in /dev/null/x')])
+def test_bad_arguments_exit_2(write_study, capsys, argv, message):
+    assert sweep_cli.main([str(write_study(STUDY))] + argv) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_local_workers_and_a_real_cluster_give_the_same_table(write_study, tmp_path):
+    path = write_study(STUDY)
+    tables = {}
+    for name, argv in (('here', ['--workers', '1']), ('local', ['--workers', '2'])):
+        assert sweep_cli.main([str(path), '--out', str(tmp_path / name), '--chunk', '30',
+                               *argv]) == 0
+        tables[name] = pq.read_table(tmp_path / name / 'results.parquet')
+    with dask_cluster(tmp_path, workers=2) as address:
+        assert sweep_cli.main([str(path), '--out', str(tmp_path / 'cluster'), '--chunk', '30',
+                               '--scheduler', address]) == 0
+    tables['cluster'] = pq.read_table(tmp_path / 'cluster' / 'results.parquet')
+    assert tables['here'].num_rows == 144
+    assert tables['local'].equals(tables['here']) and tables['cluster'].equals(tables['here'])
+
+
+@contextlib.contextmanager
+def dask_cluster(tmp_path, workers):
+    """Start a Dask scheduler and worker processes on this machine; yield its address."""
+    dask = str(pathlib.Path(sys.executable).parent / 'dask')
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        str(p) for p in sorted((ROOT / 'src').iterdir()) if (p / 'package.xml').exists()))
+    scheduler_file = tmp_path / 'scheduler.json'
+    logs = open(tmp_path / 'dask.log', 'w')
+    processes = [subprocess.Popen(
+        [dask, 'scheduler', '--host', '127.0.0.1', '--port', '0', '--no-dashboard',
+         '--scheduler-file', str(scheduler_file)], env=env, stdout=logs, stderr=logs)]
+    try:
+        assert wait_for(scheduler_file.exists, 60), (tmp_path / 'dask.log').read_text()
+        processes.append(subprocess.Popen(
+            [dask, 'worker', '--scheduler-file', str(scheduler_file), '--nworkers',
+             str(workers), '--nthreads', '1', '--no-dashboard'], env=env, stdout=logs,
+            stderr=logs))
+        from distributed import Client
+        address = json.loads(scheduler_file.read_text())['address']
+        with Client(address) as client:
+            client.wait_for_workers(workers, timeout=60)
+        yield address
+    finally:
+        for process in reversed(processes):
+            process.terminate()
+        for process in reversed(processes):
+            try:
+                process.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+        logs.close()
+
+
+def wait_for(condition, timeout_s):
+    """Return whether condition() came true within timeout_s (checked once more at the end)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.05)
+    return condition()

@@ -6,7 +6,8 @@ tentacle-sweep: run a design study file, writing its results table as chunks com
 
 DIR/results.parquet holds one row per point (results.py); Ctrl-C keeps every chunk
 finished and says how to continue (--resume computes only the chunks missing). --csv also
-writes DIR/results.csv once the table is whole. Chunks run on every local core (a Dask
+writes DIR/results.csv once the table is whole; DIR/plot.png shows the tip against one
+varied name, or maps it over two. Chunks run on every local core (a Dask
 LocalCluster) for large studies, or on the Dask cluster at --scheduler (default: Dask's own
 ``scheduler-address`` setting, e.g. DASK_SCHEDULER_ADDRESS), or here for small ones, one
 chunk or one worker: the same results wherever they run (engines.py). Exit 0 when every
@@ -19,6 +20,7 @@ import time
 
 import pyarrow.csv as pa_csv
 from tentacle_studies import engines
+from tentacle_studies.plot import plot_table
 from tentacle_studies.results import Results, ResultsError
 from tentacle_studies.study import load_study, StudyError
 from tqdm import tqdm
@@ -103,11 +105,13 @@ def main(args=None):
     table = results.table()
     if opts.csv:
         pa_csv.write_csv(table, results.folder / 'results.csv')
+    drawn = plot_table(table, study.names, results.folder / 'plot.png',
+                       f'{study.name}: {table.num_rows} points')
     converged = sum(table.column('converged').to_pylist())
     stable = sum(table.column('stable').to_pylist())
     print(f'{study.name}: {table.num_rows} points in {results.table_dir} ({todo} computed in '
           f'{seconds:.1f} s, {todo / max(seconds, 1e-9):.0f} a second); {converged} '
-          f'converged, {stable} stable')
+          f'converged, {stable} stable' + (f'; {drawn}' if drawn else ''))
     return 0
 
 

@@ -34,6 +34,7 @@ def test_every_row_is_the_models_equilibrium_from_the_row_before(write_study, tm
     table = pq.read_table(tmp_path / 'out' / 'results.parquet')
     assert table.column_names == COLUMNS and table.num_rows == 144
     assert (tmp_path / 'out' / 'results.csv').read_text().count('\n') == 145
+    assert (tmp_path / 'out' / 'plot.png').read_bytes().startswith(b'\x89PNG')
     study = load_study(path)
     model = TentacleModel(study.tentacle, dof=3, gravity_m_s2=study.gravity_m_s2)
     chain = model.chain(study.inserted_m)
@@ -83,6 +84,16 @@ def test_ctrl_c_keeps_the_chunks_done_and_resume_computes_the_rest(
     resumed = pq.read_table(out / 'results.parquet')
     assert sweep_cli.main([str(path), '--out', str(tmp_path / 'whole'), *here]) == 0
     assert resumed.equals(pq.read_table(tmp_path / 'whole' / 'results.parquet'))
+
+
+@pytest.mark.parametrize('vary, drawn', [
+    ('  field_t.y: {from: -0.01, to: 0.01, count: 9}\n', True),
+    ('  field_t.x: [0.0, 0.001]\n  field_t.y: [0.0, 0.002]\n  field_t.z: [0.0, 0.003]\n',
+     False)])
+def test_a_plot_for_one_or_two_varied_names(write_study, tmp_path, vary, drawn):
+    path = write_study(f'name: plotted\nvary:\n{vary}')
+    assert sweep_cli.main([str(path), '--out', str(tmp_path / 'out')]) == 0
+    assert (tmp_path / 'out' / 'plot.png').exists() == drawn
 
 
 def test_resume_refuses_another_studys_table(write_study, tmp_path, capsys):

@@ -1,0 +1,55 @@
+"""
+DIR/plot.png of a study's table: the tip against one varied name, or maps over two.
+
+matplotlib is imported here only, when a plot is drawn: a cluster's workers never need it.
+"""
+
+import numpy as np
+
+MAX_PLOTTED = 200_000   # points drawn at most (every k-th beyond): a map, not a census
+
+
+def plot_table(table, names, path, title):
+    """
+    Draw the tip (mm) against one varied name, or its x and y over two; return path or None.
+
+    Unstable or unconverged points are marked. With more than two varied names there is no
+    plot (None): the table is the result.
+    """
+    if len(names) not in (1, 2) or table.num_rows == 0:
+        return None
+    import matplotlib
+    matplotlib.use('Agg')   # files only: no display on a lab's compute node
+    import matplotlib.pyplot as plt
+    step = max(1, table.num_rows // MAX_PLOTTED)
+    columns = {name: np.asarray(table.column(name).to_numpy())[::step]
+               for name in [*names, 'tip_x_m', 'tip_y_m', 'tip_z_m', 'stable']}
+    bad = ~columns['stable'].astype(bool)
+    if len(names) == 1:
+        fig, ax = plt.subplots(figsize=(7, 4))
+        x = columns[names[0]]
+        order = np.argsort(x, kind='stable')
+        for axis in 'xyz':
+            ax.plot(x[order], 1e3 * columns[f'tip_{axis}_m'][order], '.-', ms=3,
+                    label=f'tip {axis}')
+        if bad.any():
+            ax.plot(x[bad], 1e3 * columns['tip_y_m'][bad], 'kx', label='not stable')
+        ax.set_xlabel(names[0])
+        ax.set_ylabel('tip (mm)')
+        ax.legend()
+    else:
+        fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
+        a, b = columns[names[0]], columns[names[1]]
+        for ax, axis in zip(axes, 'xy'):
+            dots = ax.scatter(a, b, c=1e3 * columns[f'tip_{axis}_m'], s=8, cmap='viridis')
+            fig.colorbar(dots, ax=ax, label=f'tip {axis} (mm)')
+            if bad.any():
+                ax.plot(a[bad], b[bad], 'rx', ms=4, label='not stable')
+                ax.legend(loc='upper right')
+            ax.set_xlabel(names[0])
+            ax.set_ylabel(names[1])
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path

@@ -88,7 +88,8 @@ def solve(chain, directions, fields_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=3, tol=
 
 
 @numba.njit(cache=True)
-def _moments(magnitudes, segment_index, directions):
+def link_moments(magnitudes, segment_index, directions):
+    """Return each link's moment (n, 3), link frame, A m^2: its segment's direction."""
     moments = np.empty((magnitudes.shape[0], 3))
     for link in range(magnitudes.shape[0]):
         moments[link] = magnitudes[link] * directions[segment_index[link]]
@@ -105,7 +106,7 @@ def _spatial_points(base_rotation, base_position, lengths, magnitudes, segment_i
     k_floor = max(1e-9 * np.max(stiffness), 1e-300)
     x = start.copy()
     for p in range(count):
-        moments = _moments(magnitudes, segment_index, directions[p])
+        moments = link_moments(magnitudes, segment_index, directions[p])
         x, status, used, _, _, lowest = spatial_newton.minimise(
             x, base_rotation, base_position, lengths, moments, levers, stiffness, fields[p],
             gravity, tol, k_floor, max_iterations, 0, 0, max_iterations + 1, newton[0],
@@ -138,7 +139,7 @@ def _planar_points(base_rotation, base_position, lengths, magnitudes, segment_in
     x = start.copy()
     a, b = np.empty(n), np.empty(n)
     for p in range(count):
-        moments = _moments(magnitudes, segment_index, directions[p])
+        moments = link_moments(magnitudes, segment_index, directions[p])
         bx, by = axis_x @ fields[p], axis_y @ fields[p]
         load_scale = 0.0
         for i in range(n):   # planar.loads

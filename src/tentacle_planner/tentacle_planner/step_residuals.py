@@ -33,13 +33,15 @@ unknowns. The kernels' arguments:
 
 import numba
 import numpy as np
-from tentacle_model import compiled_cache, planar, planar_newton, spatial, spatial_newton
+from tentacle_model import batch, compiled_cache, planar, planar_newton, spatial, spatial_newton
+from tentacle_model.batch import link_moments
 from tentacle_model.spatial import _evaluate
 from tentacle_model.spatial_newton import AT_ROUND_OFF, CONVERGED, sensitivities
 from tentacle_planner import clearance
 from tentacle_planner.clearance import gap_gradients
 
-compiled_cache.fresh(__file__, planar, planar_newton, spatial, spatial_newton, clearance)
+compiled_cache.fresh(__file__, batch, planar, planar_newton, spatial, spatial_newton,
+                     clearance)
 
 FAILED_RESIDUAL = 10.0   # each shape row of a step that did not converge (or is not finite)
 
@@ -55,15 +57,6 @@ def carried(previous, index):
 
 
 @numba.njit(cache=True)
-def _moments(magnitudes, segment_index, directions):
-    """Return each link's moment (n, 3), link frame, A m^2."""
-    moments = np.empty((magnitudes.shape[0], 3))
-    for link in range(magnitudes.shape[0]):
-        moments[link] = magnitudes[link] * directions[segment_index[link]]
-    return moments
-
-
-@numba.njit(cache=True)
 def step_residuals(start, base_rotation, base_position, lengths, magnitudes, segment_index,
                    directions, levers, stiffness, field, gravity, tol, k_floor, max_iterations,
                    newton, free, target, weight, link_radii, centres, radii, wall_points,
@@ -71,7 +64,7 @@ def step_residuals(start, base_rotation, base_position, lengths, magnitudes, seg
                    field_map, field_column, r, jac, jacobian):
     """Return (state (n, 3), usable, stability) of a 3-DoF key step; write its rows (_rows)."""
     n = lengths.shape[0]
-    moments = _moments(magnitudes, segment_index, directions)
+    moments = link_moments(magnitudes, segment_index, directions)
     x, status, _, _, _, stability = spatial_newton.minimise(
         start.reshape(-1).copy(), base_rotation, base_position, lengths, moments, levers,
         stiffness, field, gravity, tol, k_floor, max_iterations, 0, 0, max_iterations + 1,
@@ -96,7 +89,7 @@ def planar_step_residuals(start, base_rotation, base_position, lengths, magnitud
                           r, jac, jacobian):
     """Return (state (n, 3), usable, stability) of a planar key step; write its rows (_rows)."""
     n = lengths.shape[0]
-    moments = _moments(magnitudes, segment_index, directions)
+    moments = link_moments(magnitudes, segment_index, directions)
     # planar.loads: each link's torque coefficients in the base plane
     bx = base_rotation[0, 0] * field[0] + base_rotation[1, 0] * field[1] \
         + base_rotation[2, 0] * field[2]

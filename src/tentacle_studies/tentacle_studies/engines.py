@@ -39,9 +39,12 @@ def dask(address=None, workers=None):
     from distributed import as_completed, Client, LocalCluster
     with contextlib.ExitStack() as stack:
         if address is None:
+            # On this machine only, and its HTTP server on a free port: not the well-known
+            # 8787, which another cluster (a lab's dashboard) may hold.
             cluster = stack.enter_context(LocalCluster(
                 n_workers=workers or local_cores(), threads_per_worker=1, processes=True,
-                dashboard_address=None))
+                host='127.0.0.1', dashboard_address=None,
+                scheduler_kwargs={'dashboard': False, 'dashboard_address': '127.0.0.1:0'}))
             address = cluster.scheduler_address
         client = stack.enter_context(Client(address))
 

@@ -34,6 +34,7 @@ class Batch:
     converged: np.ndarray     # (P,) bool
     stability: np.ndarray     # (P,) smallest Hessian eigenvalue, N m / rad^2 (nan: unknown)
     iterations: np.ndarray    # (P,) Newton steps
+    points_m: np.ndarray      # (P, n + 1, 3) joints and tip, base first (if asked; else None)
 
     @property
     def stable(self):
@@ -42,7 +43,7 @@ class Batch:
 
 
 def solve(chain, directions, fields_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=3, tol=1e-9,
-          max_iterations=200, initial=None):
+          max_iterations=200, initial=None, points=False):
     """
     Return the Batch of a chain's equilibria at P points, each warm-started from the last.
 
@@ -54,6 +55,7 @@ def solve(chain, directions, fields_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=3, tol=
     :param fields_t: (P, 3) the uniform field per point, tesla, world frame
     :param dof: 1 (planar joints) or 3
     :param initial: the first point's start, as statics.solve takes it (default straight)
+    :param points: also every point's joints and tip (Batch.points_m)
     :raises ValueError: arrays of the wrong shape or not finite
     """
     directions = np.ascontiguousarray(directions, dtype=float)
@@ -82,9 +84,10 @@ def solve(chain, directions, fields_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=3, tol=
     arguments = (chain.base_rotation, chain.base_position_m, chain.lengths_m, magnitudes,
                  index.astype(np.intp), spatial.gravity_levers(chain),
                  chain.stiffness_n_m, directions, fields, gravity, tol, int(max_iterations),
-                 newton, start)
+                 newton, start, points)
     kernel = _spatial_points if dof == 3 else _planar_points
-    return Batch(*kernel(*arguments))
+    *solved, joints = kernel(*arguments)
+    return Batch(*solved, joints if points else None)
 
 
 @numba.njit(cache=True)
@@ -98,10 +101,12 @@ def link_moments(magnitudes, segment_index, directions):
 
 @numba.njit(cache=True)
 def _spatial_points(base_rotation, base_position, lengths, magnitudes, segment_index, levers,
-                    stiffness, directions, fields, gravity, tol, max_iterations, newton, start):
+                    stiffness, directions, fields, gravity, tol, max_iterations, newton, start,
+                    want_points):
     """Solve every point with the 3-DoF joints: see solve."""
     count, n = fields.shape[0], lengths.shape[0]
     tips, converged = np.empty((count, 3)), np.zeros(count, dtype=np.bool_)
+    joints = np.empty((count if want_points else 0, n + 1, 3))
     stability, iterations = np.full(count, np.nan), np.zeros(count, dtype=np.int64)
     k_floor = max(1e-9 * np.max(stiffness), 1e-300)
     x = start.copy()
@@ -115,6 +120,8 @@ def _spatial_points(base_rotation, base_position, lengths, magnitudes, segment_i
                           levers, stiffness, fields[p], gravity,
                           status == spatial_newton.AT_ROUND_OFF)
         tips[p] = state[2][n]
+        if want_points:
+            joints[p] = state[2]
         iterations[p] = used
         if status == spatial_newton.CONVERGED:
             converged[p], stability[p] = True, lowest
@@ -122,15 +129,17 @@ def _spatial_points(base_rotation, base_position, lengths, magnitudes, segment_i
             converged[p], stability[p] = True, np.linalg.eigvalsh(state[5])[0]
         if not (converged[p] and np.all(np.isfinite(x))):
             x = np.zeros(3 * n)   # the next point starts straight
-    return tips, converged, stability, iterations
+    return tips, converged, stability, iterations, joints
 
 
 @numba.njit(cache=True)
 def _planar_points(base_rotation, base_position, lengths, magnitudes, segment_index, levers,
-                   stiffness, directions, fields, gravity, tol, max_iterations, newton, start):
+                   stiffness, directions, fields, gravity, tol, max_iterations, newton, start,
+                   want_points):
     """Solve every point with the planar joints (planar.loads per point): see solve."""
     count, n = fields.shape[0], lengths.shape[0]
     tips, converged = np.empty((count, 3)), np.zeros(count, dtype=np.bool_)
+    joints = np.empty((count if want_points else 0, n + 1, 3))
     stability, iterations = np.full(count, np.nan), np.zeros(count, dtype=np.int64)
     k = stiffness[:, 0].copy()
     k_floor = max(1e-9 * np.max(k), 1e-300)
@@ -150,9 +159,13 @@ def _planar_points(base_rotation, base_position, lengths, magnitudes, segment_in
             x, k, a, b, load_scale, tol, k_floor, max_iterations, 0, 0, max_iterations + 1,
             newton[0], int(newton[1]), newton[2])
         tip = base_position.copy()
+        if want_points:
+            joints[p, 0] = tip
         for i in range(n):
             c, s = np.cos(x[i]), np.sin(x[i])
             tip += lengths[i] * (c * axis_x + s * axis_y)
+            if want_points:
+                joints[p, i + 1] = tip
         tips[p] = tip
         iterations[p] = used
         if status == spatial_newton.CONVERGED:
@@ -163,4 +176,4 @@ def _planar_points(base_rotation, base_position, lengths, magnitudes, segment_in
             stability[p] = smallest_eigenvalue(banded[1], banded[0, 1:])
         if not (converged[p] and np.all(np.isfinite(x))):
             x = np.zeros(n)
-    return tips, converged, stability, iterations
+    return tips, converged, stability, iterations, joints

@@ -26,7 +26,7 @@ def test_every_point_is_the_equilibrium_solve_finds_from_the_last(braided, dof):
     if dof == 1:
         fields[:, 2] = 0.0
     got = batch.solve(chain, directions, fields, model.gravity_m_s2, dof=dof,
-                      tol=model.tol, max_iterations=model.max_iterations)
+                      tol=model.tol, max_iterations=model.max_iterations, points=True)
     magnitudes = np.linalg.norm(chain.moments_a_m2, axis=1)
     state = None
     for p in range(len(fields)):
@@ -35,6 +35,7 @@ def test_every_point_is_the_equilibrium_solve_finds_from_the_last(braided, dof):
         eq = solution.equilibrium
         assert got.converged[p] == eq.converged
         np.testing.assert_allclose(got.tips_m[p], eq.points_m[-1], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(got.points_m[p], eq.points_m, rtol=0, atol=1e-12)
         assert got.stability[p] == pytest.approx(eq.stability, rel=1e-9, abs=1e-15)
         assert got.iterations[p] == eq.iterations
         state = solution.state if eq.converged else None

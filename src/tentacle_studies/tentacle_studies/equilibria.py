@@ -10,7 +10,10 @@ COLUMNS = ('tip_x_m', 'tip_y_m', 'tip_z_m', 'converged', 'stable', 'stability')
 
 def solve_points(study, start, stop):
     """
-    Return {column: (k,) values} of points start..stop: the varied names, then COLUMNS.
+    Return {column: (k,) values} of points start..stop.
+
+    The varied names, then COLUMNS, then the points of interest (poi_K_x_m, ...: on the link
+    that holds each arc length, linearly).
 
     The points are solved in order, each from the one before (the first straight): a chunk
     of a grid is a run along its last name, so a solve is a few Newton steps.
@@ -33,9 +36,20 @@ def solve_points(study, start, stop):
                                                          np.zeros(count)])
         else:
             fields[:, AXES[which]] = values
+    interest = study.points_of_interest_m
     solved = batch.solve(chain, directions, fields, model.gravity_m_s2, dof=model.dof,
-                         tol=model.tol, max_iterations=model.max_iterations)
+                         tol=model.tol, max_iterations=model.max_iterations,
+                         points=bool(interest))
     tips = solved.tips_m
-    return {**points, 'tip_x_m': tips[:, 0], 'tip_y_m': tips[:, 1], 'tip_z_m': tips[:, 2],
-            'converged': solved.converged, 'stable': solved.stable,
-            'stability': solved.stability}
+    out = {**points, 'tip_x_m': tips[:, 0], 'tip_y_m': tips[:, 1], 'tip_z_m': tips[:, 2],
+           'converged': solved.converged, 'stable': solved.stable,
+           'stability': solved.stability}
+    if interest:
+        along = np.concatenate([[0.0], np.cumsum(chain.lengths_m)])   # the joints' arc length
+        for k, s in enumerate(interest):
+            link = min(max(int(np.searchsorted(along, s, side='right')) - 1, 0), chain.size - 1)
+            w = (s - along[link]) / chain.lengths_m[link]
+            at = (1 - w) * solved.points_m[:, link] + w * solved.points_m[:, link + 1]
+            for axis, name in enumerate('xyz'):
+                out[f'poi_{k}_{name}_m'] = at[:, axis]
+    return out

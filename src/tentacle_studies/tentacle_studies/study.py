@@ -7,6 +7,7 @@ A design study file (../shared/DESIGN.md, "Design studies"): what is fixed, what
     inserted_m: 0.042                 # optional: all
     field_t: [0.0, 0.005, 0.0]        # unless varied
     model: {dof: 1, sublinks: 8}
+    points_of_interest_m: [0.007, 0.021, 0.035]   # optional (beyond DESIGN.md): arc lengths
     vary:                             # a grid {from, to, count} or a list of values
       magnetisation_deg.0: {from: 0, to: 345, count: 24}
       field_t.y: [0.0, 0.005, 0.010]
@@ -17,7 +18,9 @@ its link x-y plane, deg, with the tentacle file's remanence) and ``field_t.x``, 
 ``.z`` (tesla, world frame). A grid is every combination, the last name varying fastest, so
 that neighbouring points are warm starts for each other; a Latin hypercube or random sample
 draws N points: a range uniformly between its ends (its count is the grid's only), a list
-one of its values.
+one of its values. ``points_of_interest_m`` adds each such point's position along the body
+(arc length from the base) to the table: columns ``poi_K_x_m``, ``_y_m``, ``_z_m`` after
+DESIGN.md's (the thesis' chapter 2 measured its deflections at the magnets' centres).
 """
 
 from dataclasses import dataclass
@@ -80,6 +83,7 @@ class Study:
     gravity_m_s2: np.ndarray
     varied: tuple            # of Varied, in the file's order
     sample: tuple            # ('grid', None, None) or (kind, count, seed)
+    points_of_interest_m: tuple = ()   # arc lengths from the base, m
 
     @property
     def names(self):
@@ -135,7 +139,8 @@ def load_study(path):
     reader = FieldReader(path, StudyError)
     doc = reader.mapping(document, 'study', ('name', 'compute', 'tentacle', 'scene',
                                              'inserted_m', 'field_t', 'model', 'vary',
-                                             'sample'), ('name', 'vary'))
+                                             'sample', 'points_of_interest_m'),
+                         ('name', 'vary'))
     compute = doc.get('compute', 'equilibrium')
     if compute != 'equilibrium':
         reader.fail('compute', f'{compute!r}: this version computes equilibria only '
@@ -162,8 +167,17 @@ def load_study(path):
     gravity = reader.vector(model.get('gravity_m_s2', [0.0, 0.0, 0.0]), 'model.gravity_m_s2')
     varied = _varied(reader, doc['vary'], tentacle)
     sample = _sample(reader, doc.get('sample', 'grid'), varied)
+    interest = doc.get('points_of_interest_m') or []
+    if not isinstance(interest, list):
+        reader.fail('points_of_interest_m', f'expected a list of arc lengths, got {interest!r}')
+    interest = tuple(reader.number(v, f'points_of_interest_m[{i}]', allow_zero=True)
+                     for i, v in enumerate(interest))
+    for i, s in enumerate(interest):
+        if s > inserted * (1 + 1e-12):
+            reader.fail(f'points_of_interest_m[{i}]', f'{s:g} m is past the inserted '
+                                                      f'{inserted:g} m')
     study = Study(str(doc['name']), compute, path, hashlib.sha256(data).hexdigest(), tentacle,
-                  inserted, field, dof, sublinks, gravity, varied, sample)
+                  inserted, field, dof, sublinks, gravity, varied, sample, interest)
     if study.size > MAX_POINTS:
         reader.fail('vary', f'{study.size} points: at most {MAX_POINTS}')
     return study

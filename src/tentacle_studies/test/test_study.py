@@ -62,6 +62,8 @@ sample: {{{kind}: 200, seed: 7}}
     ('name: x\nvary: {field_t.y: {from: 0, to: 1, count: 100000}, '
      'field_t.x: {from: 0, to: 1, count: 1000}}\n', 'points: at most'),
     ('name: x\nvary: {field_t.y: [0]}\nextra: 1\n', "unknown key(s) ['extra']"),
+    ('name: x\npoints_of_interest_m: [0.06]\nvary: {field_t.y: [0]}\n',
+     'points_of_interest_m[0]: 0.06 m is past the inserted'),
 ])
 def test_a_bad_study_is_refused_naming_the_key(write_study, text, message):
     with pytest.raises(StudyError, match=None) as caught:

@@ -171,3 +171,23 @@ def wait_for(condition, timeout_s):
             return True
         time.sleep(0.05)
     return condition()
+
+
+def test_points_of_interest_lie_on_the_body(write_study, tmp_path):
+    # At the base, at the tip, and half way along a link: on the segment between its joints.
+    text = STUDY.replace('vary:', 'points_of_interest_m: [0.0, 0.0175, 0.05]\nvary:')
+    path = write_study(text)
+    assert sweep_cli.main([str(path), '--out', str(tmp_path / 'out')]) == 0
+    rows = pq.read_table(tmp_path / 'out' / 'results.parquet').to_pydict()
+    study = load_study(path)
+    assert list(rows)[-9:] == [f'poi_{k}_{axis}_m' for k in range(3) for axis in 'xyz']
+    base, tip = study.tentacle.base_position_m, np.column_stack(
+        [rows[f'tip_{axis}_m'] for axis in 'xyz'])
+    poi = [np.column_stack([rows[f'poi_{k}_{axis}_m'] for axis in 'xyz']) for k in range(3)]
+    np.testing.assert_allclose(poi[0], np.broadcast_to(base, poi[0].shape), atol=1e-15)
+    np.testing.assert_allclose(poi[2], tip, atol=1e-15)
+    # 17.5 mm: half way along the second 10 mm segment's link (one sub-link a segment)
+    lengths = [s.length_m for s in study.tentacle.segments]
+    assert np.cumsum(lengths)[0] < 0.0175 < np.cumsum(lengths)[1]
+    distance = np.linalg.norm(poi[1] - poi[0], axis=1)
+    assert np.all(distance <= 0.0175 + 1e-12) and np.all(distance > 0.01)

@@ -53,6 +53,11 @@ class Varied:
     high: float = None
     count: int = None
 
+    @property
+    def length(self):
+        """Return how many values the grid takes of this name (None: a range without count)."""
+        return len(self.values) if self.values is not None else self.count
+
     def grid(self):
         """Return the grid's values of this name (a range: count evenly spaced, ends in)."""
         if self.values is not None:
@@ -94,7 +99,7 @@ class Study:
     def size(self):
         """Return the number of points."""
         if self.sample[0] == 'grid':
-            return math.prod(len(v.grid()) for v in self.varied)
+            return math.prod(v.length for v in self.varied)
         return self.sample[1]
 
     def points(self, start=0, stop=None):
@@ -145,8 +150,8 @@ def load_study(path):
     if compute != 'equilibrium':
         reader.fail('compute', f'{compute!r}: this version computes equilibria only '
                                "('equilibrium')")
-    if 'tentacle' not in doc:
-        reader.fail('tentacle', 'an equilibrium study names its tentacle file')
+    if 'tentacle' not in doc or 'scene' in doc:
+        reader.fail('tentacle', 'an equilibrium study names its tentacle file (and no scene)')
     try:
         tentacle = load_tentacle(path.parent / str(doc['tentacle']))
     except SpecError as exc:
@@ -224,10 +229,8 @@ def _sample(reader, sample, varied):
             if v.values is None and v.count is None:
                 reader.fail(f'vary.{v.name}', 'a grid needs a count for a range')
         return 'grid', None, None
-    if not isinstance(sample, dict) or len(sample) not in (1, 2):
-        reader.fail('sample', f'{sample!r}: grid, {{latin_hypercube: N, seed: S}} or '
-                              '{random: N, seed: S}')
-    kinds = [k for k in sample if k in ('latin_hypercube', 'random')]
+    kinds = [k for k in sample if k in ('latin_hypercube', 'random')] \
+        if isinstance(sample, dict) else []
     if len(kinds) != 1:
         reader.fail('sample', f'{sample!r}: grid, {{latin_hypercube: N, seed: S}} or '
                               '{random: N, seed: S}')

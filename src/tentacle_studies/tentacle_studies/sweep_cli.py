@@ -59,11 +59,11 @@ def engine(opts, chunks, points):
         import dask   # its config: a lab sets the address once for every study
         address = dask.config.get('scheduler-address', None)
     if address:
-        return engines.dask(address), f'the Dask cluster at {address}'
+        return engines.dask(address), f'on the Dask cluster at {address}'
     workers = min(opts.workers or engines.local_cores(), chunks)
     if workers <= 1 or (opts.workers is None and points < LOCAL_WORKERS_FROM_POINTS):
-        return engines.in_process(), 'this process'
-    return engines.dask(workers=workers), f'{workers} local worker processes'
+        return engines.in_process(), 'in this process'
+    return engines.dask(workers=workers), f'on {workers} local worker processes'
 
 
 def main(args=None):
@@ -86,7 +86,7 @@ def main(args=None):
     todo = sum(stop - start for start, stop in bounds.values())
     running, where = engine(opts, len(missing), todo)
     print(f'{study.name}: {study.size} points ({", ".join(study.names)}), {todo} to compute '
-          f'in {len(missing)} chunk(s) of up to {results.chunk_points} on {where}', flush=True)
+          f'in {len(missing)} chunk(s) of up to {results.chunk_points}, {where}', flush=True)
     t0 = time.perf_counter()
     try:
         with running as compute, tqdm(total=todo, unit='pt', desc=study.name,

@@ -61,6 +61,9 @@ sample: {{{kind}: 200, seed: 7}}
     ('name: x\ninserted_m: 1.0\nvary: {field_t.y: [0]}\n', 'inserted_m: 1 m is more'),
     ('name: x\nvary: {field_t.y: {from: 0, to: 1, count: 100000}, '
      'field_t.x: {from: 0, to: 1, count: 1000}}\n', 'points: at most'),
+    ('name: x\nvary: {field_t.y: {from: 0, to: 1, count: 1000000000000}}\n',
+     'points: at most'),   # refused before any value is made
+    ('name: x\nscene: s.yaml\nvary: {field_t.y: [0]}\n', 'and no scene'),
     ('name: x\nvary: {field_t.y: [0]}\nextra: 1\n', "unknown key(s) ['extra']"),
     ('name: x\npoints_of_interest_m: [0.06]\nvary: {field_t.y: [0]}\n',
      'points_of_interest_m[0]: 0.06 m is past the inserted'),

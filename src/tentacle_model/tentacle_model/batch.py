@@ -100,14 +100,19 @@ def link_moments(magnitudes, segment_index, directions):
 
 
 @numba.njit(cache=True)
+def _outputs(count, n, want_points):
+    """Return the kernels' (tips, converged, stability, iterations, joints) to fill in."""
+    return (np.empty((count, 3)), np.zeros(count, dtype=np.bool_), np.full(count, np.nan),
+            np.zeros(count, dtype=np.int64), np.empty((count if want_points else 0, n + 1, 3)))
+
+
+@numba.njit(cache=True)
 def _spatial_points(base_rotation, base_position, lengths, magnitudes, segment_index, levers,
                     stiffness, directions, fields, gravity, tol, max_iterations, newton, start,
                     want_points):
     """Solve every point with the 3-DoF joints: see solve."""
     count, n = fields.shape[0], lengths.shape[0]
-    tips, converged = np.empty((count, 3)), np.zeros(count, dtype=np.bool_)
-    joints = np.empty((count if want_points else 0, n + 1, 3))
-    stability, iterations = np.full(count, np.nan), np.zeros(count, dtype=np.int64)
+    tips, converged, stability, iterations, joints = _outputs(count, n, want_points)
     k_floor = max(1e-9 * np.max(stiffness), 1e-300)
     x = start.copy()
     for p in range(count):
@@ -138,9 +143,7 @@ def _planar_points(base_rotation, base_position, lengths, magnitudes, segment_in
                    want_points):
     """Solve every point with the planar joints (planar.loads per point): see solve."""
     count, n = fields.shape[0], lengths.shape[0]
-    tips, converged = np.empty((count, 3)), np.zeros(count, dtype=np.bool_)
-    joints = np.empty((count if want_points else 0, n + 1, 3))
-    stability, iterations = np.full(count, np.nan), np.zeros(count, dtype=np.int64)
+    tips, converged, stability, iterations, joints = _outputs(count, n, want_points)
     k = stiffness[:, 0].copy()
     k_floor = max(1e-9 * np.max(k), 1e-300)
     axis_x, axis_y = base_rotation[:, 0].copy(), base_rotation[:, 1].copy()

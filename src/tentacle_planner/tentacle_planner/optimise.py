@@ -386,7 +386,7 @@ class Problem:
         return [(a, b) for a, b in zip(self.magnetised, self.magnetised[1:])
                 if a + 1 == b and {a, b} & free]
 
-    def _neighbour_rows(self, x, directions, derivatives=None, limit=None):
+    def _neighbour_rows(self, x, directions, derivatives=None):
         """
         Return (r, dr/dx): the neighbour-angle limit as residuals, ahead of its SLSQP polish.
 
@@ -395,9 +395,8 @@ class Problem:
         (fit) has only a small step left to keep it exactly.
 
         :param derivatives: unknowns.directions' second answer at x, if the caller has it
-        :param limit: rad, in place of the constraints' (None: theirs)
         """
-        limit = self.constraints.max_neighbour_angle_rad if limit is None else limit
+        limit = self.constraints.max_neighbour_angle_rad
         if limit is None:
             return np.zeros(0), np.zeros((0, self.size))
         if derivatives is None:

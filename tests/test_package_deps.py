@@ -27,6 +27,7 @@ IMPORT_KEYS = {  # import name -> rosdep key
     'pytest': 'python3-pytest',
     'scipy': 'python3-scipy',
     'serial': 'python3-serial',
+    'sklearn': 'python3-sklearn',
     'threadpoolctl': 'python3-threadpoolctl',
     'rosbags': 'python3-rosbags',
     'tqdm': 'python3-tqdm',

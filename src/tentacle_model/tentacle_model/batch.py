@@ -43,7 +43,7 @@ class Batch:
 
 
 def solve(chain, directions, fields_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=3, tol=1e-9,
-          max_iterations=200, initial=None, points=False):
+          max_iterations=200, initial=None, points=False, warm=True):
     """
     Return the Batch of a chain's equilibria at P points, each warm-started from the last.
 
@@ -56,6 +56,9 @@ def solve(chain, directions, fields_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=3, tol=
     :param dof: 1 (planar joints) or 3
     :param initial: the first point's start, as statics.solve takes it (default straight)
     :param points: also every point's joints and tip (Batch.points_m)
+    :param warm: start each point from the one before; False: every point from ``initial``
+        (a tentacle of its own, its field switched on from rest: one equilibrium per point
+        where several are stable, whatever order the points come in)
     :raises ValueError: arrays of the wrong shape or not finite
     """
     directions = np.ascontiguousarray(directions, dtype=float)
@@ -84,7 +87,7 @@ def solve(chain, directions, fields_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=3, tol=
     arguments = (chain.base_rotation, chain.base_position_m, chain.lengths_m, magnitudes,
                  index.astype(np.intp), spatial.gravity_levers(chain),
                  chain.stiffness_n_m, directions, fields, gravity, tol, int(max_iterations),
-                 newton, start, points)
+                 newton, start, points, warm)
     kernel = _spatial_points if dof == 3 else _planar_points
     *solved, joints = kernel(*arguments)
     return Batch(*solved, joints if points else None)
@@ -109,7 +112,7 @@ def _outputs(count, n, want_points):
 @numba.njit(cache=True)
 def _spatial_points(base_rotation, base_position, lengths, magnitudes, segment_index, levers,
                     stiffness, directions, fields, gravity, tol, max_iterations, newton, start,
-                    want_points):
+                    want_points, warm):
     """Solve every point with the 3-DoF joints: see solve."""
     count, n = fields.shape[0], lengths.shape[0]
     tips, converged, stability, iterations, joints = _outputs(count, n, want_points)
@@ -134,13 +137,15 @@ def _spatial_points(base_rotation, base_position, lengths, magnitudes, segment_i
             converged[p], stability[p] = True, np.linalg.eigvalsh(state[5])[0]
         if not (converged[p] and np.all(np.isfinite(x))):
             x = np.zeros(3 * n)   # the next point starts straight
+        if not warm:
+            x = start.copy()
     return tips, converged, stability, iterations, joints
 
 
 @numba.njit(cache=True)
 def _planar_points(base_rotation, base_position, lengths, magnitudes, segment_index, levers,
                    stiffness, directions, fields, gravity, tol, max_iterations, newton, start,
-                   want_points):
+                   want_points, warm):
     """Solve every point with the planar joints (planar.loads per point): see solve."""
     count, n = fields.shape[0], lengths.shape[0]
     tips, converged, stability, iterations, joints = _outputs(count, n, want_points)
@@ -179,4 +184,6 @@ def _planar_points(base_rotation, base_position, lengths, magnitudes, segment_in
             stability[p] = smallest_eigenvalue(banded[1], banded[0, 1:])
         if not (converged[p] and np.all(np.isfinite(x))):
             x = np.zeros(n)
+        if not warm:
+            x = start.copy()
     return tips, converged, stability, iterations, joints

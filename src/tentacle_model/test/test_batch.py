@@ -43,6 +43,27 @@ def test_every_point_is_the_equilibrium_solve_finds_from_the_last(braided, dof):
     assert np.ptp(got.tips_m[:, 1]) > 0.2 * braided.length_m   # the points differ
 
 
+@pytest.mark.parametrize('dof', [1, 3])
+def test_without_warm_starts_every_point_is_solved_from_straight(braided, dof):
+    model = TentacleModel(braided, dof=dof, sublinks=2, gravity_m_s2=[0.0, 0.0, -9.81])
+    chain = model.chain(braided.length_m)
+    directions, fields = sweep(braided, 30, dof + 10)
+    if dof == 1:
+        fields[:, 2] = 0.0
+    got = batch.solve(chain, directions, fields, model.gravity_m_s2, dof=dof, tol=model.tol,
+                      max_iterations=model.max_iterations, warm=False)
+    magnitudes = np.linalg.norm(chain.moments_a_m2, axis=1)
+    for p in range(len(fields)):
+        moments = magnitudes[:, None] * directions[p][chain.segment_index]
+        eq = model.solve(braided.length_m, fields[p], None, moments).equilibrium
+        np.testing.assert_allclose(got.tips_m[p], eq.points_m[-1], rtol=0, atol=1e-12)
+        assert got.iterations[p] == eq.iterations
+    backwards = batch.solve(chain, directions[::-1], fields[::-1], model.gravity_m_s2,
+                            dof=dof, tol=model.tol, max_iterations=model.max_iterations,
+                            warm=False)
+    np.testing.assert_array_equal(backwards.tips_m[::-1], got.tips_m)   # order is nothing
+
+
 def test_refuses_what_it_cannot_solve(braided):
     chain = TentacleModel(braided, dof=3).chain(braided.length_m)
     segments = len(braided.segments)

@@ -16,13 +16,22 @@ def solve_points(study, start, stop):
     that holds each arc length, linearly).
 
     The points are solved in order, each from the one before (the first straight): a chunk
-    of a grid is a run along its last name, so a solve is a few Newton steps.
+    of a grid is a run along its last name, so a solve is a few Newton steps. A study whose
+    model.start is straight solves each from the straight body.
+    """
+    return solve_at(study, study.points(start, stop))
+
+
+def solve_at(study, points, warm=None):
+    """
+    Return solve_points' columns at points {varied name: (k,) values} of the study's names.
+
+    :param warm: each point from the one before (default: as the study's model.start says)
     """
     spec = study.tentacle
     model = TentacleModel(spec, dof=study.dof, sublinks=study.sublinks,
                           gravity_m_s2=study.gravity_m_s2)
     chain = model.chain(study.inserted_m)
-    points = study.points(start, stop)
     count = len(next(iter(points.values())))
     own = np.array([s.magnetisation_a_per_m / max(np.linalg.norm(s.magnetisation_a_per_m),
                                                   1e-300) for s in spec.segments])
@@ -39,7 +48,8 @@ def solve_points(study, start, stop):
     interest = study.points_of_interest_m
     solved = batch.solve(chain, directions, fields, model.gravity_m_s2, dof=model.dof,
                          tol=model.tol, max_iterations=model.max_iterations,
-                         points=bool(interest))
+                         points=bool(interest),
+                         warm=study.warm if warm is None else warm)
     tips = solved.tips_m
     out = {**points, 'tip_x_m': tips[:, 0], 'tip_y_m': tips[:, 1], 'tip_z_m': tips[:, 2],
            'converged': solved.converged, 'stable': solved.stable,

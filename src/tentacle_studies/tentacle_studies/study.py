@@ -6,7 +6,7 @@ A design study file (../shared/DESIGN.md, "Design studies"): what is fixed, what
     tentacle: ../tentacles/chapter2.yaml
     inserted_m: 0.042                 # optional: all
     field_t: [0.0, 0.005, 0.0]        # unless varied
-    model: {dof: 1, sublinks: 8}
+    model: {dof: 1, sublinks: 8}      # also gravity_m_s2, and start: previous or straight
     points_of_interest_m: [0.007, 0.021, 0.035]   # optional (beyond DESIGN.md): arc lengths
     vary:                             # a grid {from, to, count} or a list of values
       magnetisation_deg.0: {from: 0, to: 345, count: 24}
@@ -21,6 +21,12 @@ draws N points: a range uniformly between its ends (its count is the grid's only
 one of its values. ``points_of_interest_m`` adds each such point's position along the body
 (arc length from the base) to the table: columns ``poi_K_x_m``, ``_y_m``, ``_z_m`` after
 DESIGN.md's (the thesis' chapter 2 measured its deflections at the magnets' centres).
+
+``model.start`` (beyond DESIGN.md): ``previous`` (default) solves each point from the one
+before, as a rig sweeping its field goes; ``straight`` solves each from the straight body,
+a tentacle of its own with its field switched on: where several equilibria are stable, the
+one a point lands in then does not depend on its neighbours (a 3-DoF point takes more
+Newton steps so).
 """
 
 from dataclasses import dataclass
@@ -89,6 +95,7 @@ class Study:
     varied: tuple            # of Varied, in the file's order
     sample: tuple            # ('grid', None, None) or (kind, count, seed)
     points_of_interest_m: tuple = ()   # arc lengths from the base, m
+    warm: bool = True        # model.start: previous (True) or straight
 
     @property
     def names(self):
@@ -162,7 +169,8 @@ def load_study(path):
         reader.fail('inserted_m', f'{inserted:g} m is more than the tentacle '
                                   f'({tentacle.length_m:g} m)')
     field = reader.vector(doc.get('field_t', [0.0, 0.0, 0.0]), 'field_t')
-    model = reader.mapping(doc.get('model', {}), 'model', ('dof', 'sublinks', 'gravity_m_s2'))
+    model = reader.mapping(doc.get('model', {}), 'model',
+                           ('dof', 'sublinks', 'gravity_m_s2', 'start'))
     dof = model.get('dof', 3)
     if dof not in (1, 3) or isinstance(dof, bool):
         reader.fail('model.dof', f'{dof!r} is not 1 or 3')
@@ -170,6 +178,9 @@ def load_study(path):
     if isinstance(sublinks, bool) or not isinstance(sublinks, int) or not 1 <= sublinks <= 64:
         reader.fail('model.sublinks', f'{sublinks!r} is not a whole number from 1 to 64')
     gravity = reader.vector(model.get('gravity_m_s2', [0.0, 0.0, 0.0]), 'model.gravity_m_s2')
+    start = model.get('start', 'previous')
+    if start not in ('previous', 'straight'):
+        reader.fail('model.start', f"{start!r} is not 'previous' or 'straight'")
     varied = _varied(reader, doc['vary'], tentacle)
     sample = _sample(reader, doc.get('sample', 'grid'), varied)
     interest = doc.get('points_of_interest_m') or []
@@ -182,7 +193,8 @@ def load_study(path):
             reader.fail(f'points_of_interest_m[{i}]', f'{s:g} m is past the inserted '
                                                       f'{inserted:g} m')
     study = Study(str(doc['name']), compute, path, hashlib.sha256(data).hexdigest(), tentacle,
-                  inserted, field, dof, sublinks, gravity, varied, sample, interest)
+                  inserted, field, dof, sublinks, gravity, varied, sample, interest,
+                  start == 'previous')
     if study.size > MAX_POINTS:
         reader.fail('vary', f'{study.size} points: at most {MAX_POINTS}')
     return study

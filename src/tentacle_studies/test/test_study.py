@@ -57,6 +57,8 @@ sample: {{{kind}: 200, seed: 7}}
     ('name: x\nvary: {field_t.y: [0]}\nsample: {random: 0}\n', 'sample.random'),
     ('name: x\ncompute: plan\nvary: {field_t.y: [0]}\n', "compute: 'plan'"),
     ('name: x\nvary: {field_t.y: [0]}\nmodel: {dof: 2}\n', 'model.dof'),
+    ('name: x\nvary: {field_t.y: [0]}\nmodel: {start: cold}\n',
+     "model.start: 'cold' is not 'previous' or 'straight'"),
     ('name: x\nvary: {field_t.y: [nan]}\n', 'vary.field_t.y[0]'),
     ('name: x\ninserted_m: 1.0\nvary: {field_t.y: [0]}\n', 'inserted_m: 1 m is more'),
     ('name: x\nvary: {field_t.y: {from: 0, to: 1, count: 100000}, '

@@ -19,6 +19,7 @@ Run: make bench-model (creates the bench-only .venv-bench with the peer).
 """
 
 import argparse
+from dataclasses import replace
 import json
 import os
 import pathlib
@@ -26,12 +27,17 @@ import sys
 import time
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
-sys.path[:0] = [str(ROOT / 'src' / 'tentacle_model'), str(ROOT / 'bench')]
+sys.path[:0] = [*(str(p) for p in sorted((ROOT / 'src').iterdir())
+                  if (p / 'package.xml').exists()), str(ROOT / 'bench')]
 
 import numpy as np  # noqa: E402
 from tentacle_model.chain import discretise  # noqa: E402
+from tentacle_model.model import TentacleModel  # noqa: E402
 from tentacle_model.statics import solve  # noqa: E402
 from tentacle_model.tentacle_spec import load_tentacle  # noqa: E402
+from tentacle_studies import equilibria  # noqa: E402
+from tentacle_studies.study import load_study  # noqa: E402
+from tentacle_studies.surrogate import Surrogate  # noqa: E402
 
 TENTACLES = ROOT / 'config' / 'tentacles'
 SUBLINKS = (1, 2, 4, 8, 10, 16, 32, 64)  # 10: the braided tentacle at 50 links
@@ -169,6 +175,95 @@ def run_coiling(quick):
     return rows
 
 
+CHAPTER2_SHAPES = 200
+CHAPTER2_SUBLINKS = (1, 2, 4, 8, 16, 32)
+CHAPTER2_REFERENCE_SUBLINKS = 128
+
+
+def run_chapter2(quick):
+    """
+    Return rows for chapter 2's tentacle at new magnetisations: the model and its surrogate.
+
+    The surrogate (tentacle_studies.surrogate: two hidden layers of 64) is trained on the
+    13,824-point babble (config/studies/ch2_babble.yaml, planar x8) to give the tip; the
+    error is the mean over 200 magnetisations drawn at random (off the babble's grid), each
+    solved from straight, of the tip's distance from planar x128's over L. cold ms: one
+    shape (statics through TentacleModel.solve, or one surrogate call); warm ms: a shape in
+    batch (tentacle_model.batch, or one surrogate call for all 200).
+    """
+    study = load_study(ROOT / 'config' / 'studies' / 'ch2_babble.yaml')
+    spec, names = study.tentacle, study.names
+    rng = np.random.default_rng(0)
+    angles = rng.uniform(0.0, 2 * np.pi, (CHAPTER2_SHAPES, len(names)))
+    points = {name: np.degrees(angles[:, k]) for k, name in enumerate(names)}
+
+    def tips(sublinks):
+        t0 = time.perf_counter()
+        columns = equilibria.solve_at(replace(study, sublinks=sublinks), points, warm=False)
+        per_shape = (time.perf_counter() - t0) / CHAPTER2_SHAPES
+        return np.column_stack([columns['tip_x_m'], columns['tip_y_m']]), per_shape, \
+            bool(columns['converged'].all())
+
+    reference = tips(CHAPTER2_REFERENCE_SUBLINKS)[0]
+    print(f'chapter 2: {CHAPTER2_SHAPES} magnetisations against planar '
+          f'x{CHAPTER2_REFERENCE_SUBLINKS}; cold ms: one shape, warm ms: a shape in batch',
+          flush=True)
+
+    def error(found):
+        return float(np.mean(np.linalg.norm(found - reference, axis=1)) / spec.length_m)
+
+    rows = []
+    repeats = 1 if quick else 3
+    for sublinks in CHAPTER2_SUBLINKS:
+        found, batch_s, converged = min((tips(sublinks) for _ in range(repeats)),
+                                        key=lambda t: t[1])
+        model = TentacleModel(spec, dof=1, sublinks=sublinks, gravity_m_s2=study.gravity_m_s2)
+        moments = [_moments(model, spec, a) for a in angles[:40]]
+        single = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            for m in moments:
+                model.solve(spec.length_m, study.field_t, None, m)
+            single.append((time.perf_counter() - t0) / len(moments))
+        rows.append({'scene': 'chapter 2 (200 shapes)', 'model': 'planar',
+                     'sublinks': sublinks, 'links': model.chain(spec.length_m).size,
+                     'converged': converged, 'cold_ms': min(single) * 1e3,
+                     'warm_ms': batch_s * 1e3, 'tip_error_of_L': error(found),
+                     'reference_ms': float('nan')})
+    babble = equilibria.solve_points(study, 0, study.size)
+    trained = np.radians(np.column_stack([babble[n] for n in names]))
+    t0 = time.perf_counter()
+    surrogate = Surrogate().fit(trained, np.column_stack([babble['tip_x_m'],
+                                                          babble['tip_y_m']]))
+    fit_s = time.perf_counter() - t0
+    one = min(_timed(lambda: [surrogate(a) for a in angles]) for _ in range(repeats * 3))
+    every = min(_timed(lambda: surrogate(angles)) for _ in range(repeats * 3))
+    rows.append({'scene': 'chapter 2 (200 shapes)', 'model': 'surrogate',
+                 'sublinks': study.sublinks, 'links': 6 * study.sublinks, 'converged': True,
+                 'cold_ms': one / CHAPTER2_SHAPES * 1e3,
+                 'warm_ms': every / CHAPTER2_SHAPES * 1e3,
+                 'tip_error_of_L': error(surrogate(angles)), 'reference_ms': float('nan'),
+                 'note': f'trained on the {study.size}-point babble at x{study.sublinks} in '
+                         f'{fit_s:.0f} s'})
+    return rows
+
+
+def _moments(model, spec, angles_rad):
+    """Return (n, 3) link moments of chapter 2's tentacle with its magnets at angles_rad."""
+    chain = model.chain(spec.length_m)
+    directions = np.array([[1.0, 0.0, 0.0]] * len(spec.segments))
+    directions[1::2] = np.column_stack([np.cos(angles_rad), np.sin(angles_rad),
+                                        np.zeros(len(angles_rad))])
+    return np.linalg.norm(chain.moments_a_m2, axis=1)[:, None] * \
+        directions[chain.segment_index]
+
+
+def _timed(call):
+    t0 = time.perf_counter()
+    call()
+    return time.perf_counter() - t0
+
+
 def run_peer(rows, max_wall_s):
     """Time PyElastica to 1% of L on the 90 degree cantilever; compare with ours there."""
     try:
@@ -226,18 +321,21 @@ def print_table(rows):
           f'{"tip error / L":>14}')
     for r in rows:
         note = '' if r['converged'] else '  (not converged)'
+        if 'note' in r:
+            note += '  ' + r['note']
         if 'cold_tip_error_of_L' in r:
             note += (f'  warm: median step of the path; from straight the tip lands '
                      f'{r["cold_tip_error_of_L"]:.2f} L away (another branch)')
         print(f'{r["scene"]:17} {r["model"]:8} {r["sublinks"]:4d} {r["links"]:5d} '
-              f'{r["cold_ms"]:9.3f} {r["warm_ms"]:9.3f} {r["tip_error_of_L"]:14.2e}' + note)
+              f'{r["cold_ms"]:9.4f} {r["warm_ms"]:9.4f} {r["tip_error_of_L"]:14.2e}' + note)
 
 
 PATH_SCENES = {'chapter 6 coiling'}  # solved step by step along a history
 STYLES = {  # model: (marker, colour, legend label)
     'linear': ('s', 'C0', 'planar, linearised'), 'planar': ('o', 'C1', 'planar'),
     '3dof': ('^', 'C2', '3-DoF'), 'linear3': ('v', 'C3', '3-DoF, linearised'),
-    '3dof+dip': ('D', 'C4', '3-DoF + dipoles (against its own reference)')}
+    '3dof+dip': ('D', 'C4', '3-DoF + dipoles (against its own reference)'),
+    'surrogate': ('*', 'C5', 'surrogate (a network trained on the model)')}
 
 
 def plot(rows, path):
@@ -314,7 +412,7 @@ def main():
     parser.add_argument('--no-peer', action='store_true', help='skip PyElastica')
     parser.add_argument('--peer-seconds', type=float, default=30.0)
     opts = parser.parse_args()
-    rows = run_scenes(opts.quick) + run_coiling(opts.quick)
+    rows = run_scenes(opts.quick) + run_coiling(opts.quick) + run_chapter2(opts.quick)
     print_table(rows)
     print_targets(rows)
     peer = None if opts.no_peer else run_peer(rows, opts.peer_seconds)

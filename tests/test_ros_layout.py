@@ -31,7 +31,7 @@ MORE_EXECUTABLES = {  # ours beyond DESIGN.md's table
     'tentacle_coils': ['calibrate_coils'],
     'tentacle_vision': ['calibrate_camera'],
     'tentacle_rig': ['rig', 'rig_command', 'recorder_node'],
-    'tentacle_studies': ['tentacle-sweep'],
+    'tentacle_studies': ['tentacle-sweep', 'tentacle-inverse'],
 }
 # beyond DESIGN.md's table: the rig as a whole, design studies (DESIGN.md: tentacle-sweep)
 MORE_PACKAGES = ['tentacle_rig', 'tentacle_studies']

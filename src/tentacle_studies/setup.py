@@ -21,6 +21,7 @@ setup(
     entry_points={
         'console_scripts': [
             'tentacle-sweep = tentacle_studies.sweep_cli:main',
+            'tentacle-inverse = tentacle_studies.inverse_cli:main',
         ],
     },
 )

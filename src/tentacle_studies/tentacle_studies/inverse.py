@@ -7,7 +7,7 @@ point's displacement from the straight body along the base's normal (the thesis'
 Turned past some angle a magnet deflects less again (thesis Fig. 2.5), so two angles give
 one deflection and a network cannot learn the map: the thesis kept each magnet's angles
 between those of its least and greatest deflection (redundancy_mask). A small network
-(scikit-learn's MLPRegressor, Inverse) then maps the kept points' deflections to each
+(networks.py, Inverse) then maps the kept points' deflections to each
 angle's cosine and sine, the thesis' six outputs. Its answers are checked in the forward
 model (forward) and scored by the thesis' error (deflection_error). direct() finds the
 angles by optimising in the forward model instead, as the planner does: slower, and
@@ -15,15 +15,10 @@ exact where the shape can be made.
 """
 
 from dataclasses import dataclass
-import warnings
 
 import numpy as np
 from scipy.optimize import least_squares
-from sklearn.exceptions import ConvergenceWarning
-from sklearn.neural_network import MLPRegressor
-from sklearn.pipeline import make_pipeline
-from sklearn.preprocessing import StandardScaler
-from tentacle_studies import equilibria
+from tentacle_studies import equilibria, networks
 
 THESIS_LAYERS = (20,) * 6   # section 2.4.2: six hidden layers of 20
 FULL_TURN_DEG = 360.0
@@ -121,24 +116,16 @@ class Inverse:
         :param seed: its initial weights
         :param max_iterations: L-BFGS iterations at most
         """
-        self.layers = tuple(layers)
-        self.network = make_pipeline(
-            StandardScaler(),
-            MLPRegressor(hidden_layer_sizes=self.layers, activation=activation,
-                         solver='lbfgs', max_iter=max_iterations, tol=1e-7,
-                         random_state=seed))
+        self.network = networks.Network(layers, activation, seed, max_iterations)
 
     def fit(self, deflections_m, angles_rad):
         """Train on (N, k) deflections, m, and their (N, k) angles, rad; return self."""
-        with warnings.catch_warnings():   # L-BFGS ending on its budget is the plan, not news
-            warnings.simplefilter('ignore', ConvergenceWarning)
-            self.network.fit(deflections_m, np.hstack([np.cos(angles_rad),
-                                                       np.sin(angles_rad)]))
+        self.network.fit(deflections_m, np.hstack([np.cos(angles_rad), np.sin(angles_rad)]))
         return self
 
     def outputs(self, deflections_m):
         """Return (N, 2k) the network's cosines then sines of the angles."""
-        return self.network.predict(np.atleast_2d(deflections_m))
+        return self.network(deflections_m)
 
     def angles_rad(self, deflections_m):
         """Return (N, k) the angles for (N, k) desired deflections, m, in (-pi, pi]."""

@@ -78,9 +78,35 @@ class Results:
         os.replace(hidden, final)
 
     def table(self):
-        """Return the table of every chunk written, in point order."""
-        files = sorted(self.table_dir.glob('chunk-*.parquet'))
-        return pa.concat_tables([pq.read_table(f) for f in files]) if files else None
+        """Return the table of every chunk written, in point order (None: none yet)."""
+        return _concatenated(self.table_dir)
+
+
+def read_results(out_dir, study):
+    """
+    Return {column: (P,) numpy array} of study's whole table in out_dir.
+
+    :raises ResultsError: no table there, one of another study, or not yet whole
+    """
+    folder = pathlib.Path(out_dir)
+    try:
+        found = json.loads((folder / 'study.json').read_text())
+    except (OSError, ValueError) as exc:
+        raise ResultsError(f'{folder}: no results table of a study here ({exc})') from None
+    if found.get('sha256') != study.sha256:
+        raise ResultsError(f'{folder} holds the results of another study or of another '
+                           f'version of {study.source} ({found.get("study")!r})')
+    table = _concatenated(folder / 'results.parquet')
+    rows = 0 if table is None else table.num_rows
+    if rows != study.size:
+        raise ResultsError(f'{folder} holds {rows} of {study.size} points: finish it with '
+                           'tentacle-sweep --resume')
+    return {name: table.column(name).to_numpy() for name in table.column_names}
+
+
+def _concatenated(table_dir):
+    files = sorted(table_dir.glob('chunk-*.parquet'))
+    return pa.concat_tables([pq.read_table(f) for f in files]) if files else None
 
 
 def _replace_text(path, text):

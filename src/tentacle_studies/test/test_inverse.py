@@ -5,7 +5,7 @@ import pathlib
 import numpy as np
 import pytest
 from sklearn.model_selection import train_test_split
-from tentacle_studies import equilibria, inverse
+from tentacle_studies import equilibria, inverse, inverse_cli, sweep_cli
 from tentacle_studies.study import load_study
 
 ROOT = pathlib.Path(__file__).resolve().parents[3]
@@ -132,3 +132,38 @@ def _study(tmp_path, text):
     path.write_text(f'tentacle: {ROOT / "config" / "tentacles" / "braided_chapter5.yaml"}\n'
                     + text)
     return load_study(path)
+
+
+def test_tentacle_inverse_answers_shapes_checked_in_the_forward_model(tmp_path, capsys):
+    made = np.radians([[40.0, -30.0, 10.0]])
+    want_mm = 1e3 * inverse.forward(load_study(BABBLE), ('magnetisation_deg.1',
+                                    'magnetisation_deg.3', 'magnetisation_deg.5'), made)[0][0]
+    assert sweep_cli.main([str(BABBLE), '--out', str(tmp_path / 'ch2'), '--workers', '1']) == 0
+    capsys.readouterr()
+    for table in (['--table', str(tmp_path / 'ch2')], []):   # read, or solved here
+        assert inverse_cli.main([str(BABBLE), *table, '--deflections-mm',
+                                 *map(str, want_mm), '--deflections-mm', '2', '6', '5']) == 0
+        lines = capsys.readouterr().out.splitlines()
+        shape = '[' + ' '.join(f'{d:.2f}' for d in want_mm) + '] mm'
+        assert lines[1].startswith(f'  requested {shape} -> magnetisation_deg.1 ')
+        assert lines[1].endswith(f'achieved {shape}: error 0.0%')   # angles: one of several
+        assert lines[2].endswith('(out of reach: the nearest shape found)')   # thesis' A
+    assert inverse_cli.main([str(BABBLE), '--method', 'lookup', '--deflections-mm', '-1.0',
+                             '-2.02', '0.79']) == 0
+    assert ('magnetisation_deg.1 240.0, magnetisation_deg.3 180.0, magnetisation_deg.5 '
+            '135.0 deg') in capsys.readouterr().out
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['--deflections-mm', '2', '6'], 'one deflection a point of interest, 3 of them'),
+    (['--deflections-mm', '0', '0', '0'], 'not all zero'),
+    (['--deflections-mm', '1', 'nan', '0'], 'finite'),
+    (['--table', '{tmp}', '--deflections-mm', '1', '2', '3'], 'no results table'),
+    (['--table', '{two}', '--deflections-mm', '1', '2', '3'], 'another study'),
+])
+def test_tentacle_inverse_refuses_bad_input_naming_it(tmp_path, capsys, argv, message):
+    assert sweep_cli.main([str(_study(tmp_path, TWO_MAGNETS).source), '--out',
+                           str(tmp_path / 'two'), '--workers', '1']) == 0
+    argv = [a.format(tmp=tmp_path, two=tmp_path / 'two') for a in argv]
+    assert inverse_cli.main([str(BABBLE), *argv]) == 2
+    assert message in capsys.readouterr().err

@@ -19,11 +19,12 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from tentacle_model import compiled_cache, planar, planar_newton, spatial, spatial_newton, statics
+from tentacle_model import (compiled_cache, eigen, planar, planar_newton, spatial,
+                            spatial_newton, statics)
 from tentacle_model.planar import evaluate as planar_evaluate, smallest_eigenvalue
 from tentacle_model.spatial import _evaluate
 
-compiled_cache.fresh(__file__, planar, planar_newton, spatial, spatial_newton)
+compiled_cache.fresh(__file__, eigen, planar, planar_newton, spatial, spatial_newton)
 
 
 @dataclass(frozen=True)
@@ -134,7 +135,7 @@ def _spatial_points(base_rotation, base_position, lengths, magnitudes, segment_i
         if status == spatial_newton.CONVERGED:
             converged[p], stability[p] = True, lowest
         elif status == spatial_newton.AT_ROUND_OFF:
-            converged[p], stability[p] = True, np.linalg.eigvalsh(state[5])[0]
+            converged[p], stability[p] = True, eigen.lowest(state[5])
         if not (converged[p] and np.all(np.isfinite(x))):
             x = np.zeros(3 * n)   # the next point starts straight
         if not warm:

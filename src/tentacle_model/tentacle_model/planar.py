@@ -19,7 +19,9 @@ W_i = (mass distal of link i) + (half of link i's mass).
 
 import numba
 import numpy as np
-from tentacle_model import link_loads
+from tentacle_model import compiled_cache, eigen, link_loads
+
+compiled_cache.fresh(__file__, eigen)
 
 
 def loads(chain, field_t, gravity_m_s2=(0.0, 0.0, 0.0)):
@@ -92,37 +94,12 @@ def evaluate(theta, k, a, b, linear, derivatives):
 @numba.njit(cache=True)
 def smallest_eigenvalue(diagonal, off):
     """
-    Return the smallest eigenvalue of a symmetric tridiagonal matrix, by bisection.
-
-    Sturm count: the number of eigenvalues below x is the number of negative pivots of
-    T - x I. Sixty halvings of the Gershgorin interval reach round-off (about 1e-16 of the
-    matrix's norm, as LAPACK does) at O(n) each, where scipy's eigh_tridiagonal spends some
-    40 us in its wrappers on a chain of a few links.
+    Return the smallest eigenvalue of a symmetric tridiagonal matrix (eigen.py).
 
     :param diagonal: (n,) diagonal
     :param off: (n - 1,) off-diagonal
     """
-    n = len(diagonal)
-    lo, hi = np.inf, -np.inf
-    for i in range(n):
-        radius = (abs(off[i - 1]) if i > 0 else 0.0) + (abs(off[i]) if i < n - 1 else 0.0)
-        lo = min(lo, diagonal[i] - radius)
-        hi = max(hi, diagonal[i] + radius)
-    tiny = 1e-300 + 1e-30 * max(abs(lo), abs(hi))
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        pivot, below = 1.0, 0
-        for i in range(n):
-            pivot = diagonal[i] - mid - (off[i - 1] ** 2 / pivot if i > 0 else 0.0)
-            if pivot == 0.0:
-                pivot = -tiny  # a zero pivot: count x itself as above the eigenvalue
-            if pivot < 0.0:
-                below += 1
-        if below >= 1:
-            hi = mid
-        else:
-            lo = mid
-    return 0.5 * (lo + hi)
+    return eigen.tridiagonal_lowest(diagonal, off)
 
 
 def energy(theta, k, a, b):

@@ -11,12 +11,12 @@ calls and resumes from the state returned; the status codes are spatial_newton's
 
 import numba
 import numpy as np
-from tentacle_model import compiled_cache, planar, spatial_newton
+from tentacle_model import compiled_cache, eigen, planar, spatial_newton
 from tentacle_model.planar import evaluate, smallest_eigenvalue
 from tentacle_model.spatial_newton import (AT_ROUND_OFF, CONVERGED, LINE_SEARCH_FAILED,
                                            NON_FINITE, OUT_OF_ITERATIONS, RUNNING)
 
-compiled_cache.fresh(__file__, planar, spatial_newton)
+compiled_cache.fresh(__file__, eigen, planar, spatial_newton)
 
 
 @numba.njit(cache=True)

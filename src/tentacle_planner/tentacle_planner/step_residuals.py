@@ -33,14 +33,15 @@ unknowns. The kernels' arguments:
 
 import numba
 import numpy as np
-from tentacle_model import batch, compiled_cache, planar, planar_newton, spatial, spatial_newton
+from tentacle_model import (batch, compiled_cache, eigen, planar, planar_newton, spatial,
+                            spatial_newton)
 from tentacle_model.batch import link_moments
 from tentacle_model.spatial import _evaluate
 from tentacle_model.spatial_newton import AT_ROUND_OFF, CONVERGED, sensitivities
 from tentacle_planner import clearance
 from tentacle_planner.clearance import gap_gradients
 
-compiled_cache.fresh(__file__, batch, planar, planar_newton, spatial, spatial_newton,
+compiled_cache.fresh(__file__, batch, eigen, planar, planar_newton, spatial, spatial_newton,
                      clearance)
 
 FAILED_RESIDUAL = 10.0   # each shape row of a step that did not converge (or is not finite)

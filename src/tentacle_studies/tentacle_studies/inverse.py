@@ -194,6 +194,6 @@ def direct(study, names, requested_m, start_rad, max_evaluations=50):
         return (got[1:] - got[0]).T / FD_STEP_RAD
 
     fit = least_squares(residuals, np.asarray(start_rad, float), jac=jacobian,
-                        max_nfev=max_evaluations, x_scale=1.0)
+                        max_nfev=max_evaluations)
     got, stable = evaluate(fit.x)
     return Direct(fit.x, got[0], stable, solves)

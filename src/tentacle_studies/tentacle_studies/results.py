@@ -93,9 +93,9 @@ def read_results(out_dir, study):
         found = json.loads((folder / 'study.json').read_text())
     except (OSError, ValueError) as exc:
         raise ResultsError(f'{folder}: no results table of a study here ({exc})') from None
-    if found.get('sha256') != study.sha256:
+    if not isinstance(found, dict) or found.get('sha256') != study.sha256:
         raise ResultsError(f'{folder} holds the results of another study or of another '
-                           f'version of {study.source} ({found.get("study")!r})')
+                           f'version of {study.source} ({found!r:.80})')
     table = _concatenated(folder / 'results.parquet')
     rows = 0 if table is None else table.num_rows
     if rows != study.size:

@@ -1,9 +1,12 @@
 """The equilibria of a study's points, in batch (tentacle_model.batch): their table columns."""
 
+from dataclasses import replace
+
 import numpy as np
 from tentacle_model import batch
 from tentacle_model.model import TentacleModel
-from tentacle_studies.study import AXES
+from tentacle_model.tentacle_spec import MU0
+from tentacle_studies.study import AXES, STRUCTURAL
 
 COLUMNS = ('tip_x_m', 'tip_y_m', 'tip_z_m', 'converged', 'stable', 'stability')
 
@@ -26,15 +29,41 @@ def solve_at(study, points, warm=None):
     """
     Return solve_points' columns at points {varied name: (k,) values} of the study's names.
 
+    Points with the same tentacle (study.STRUCTURAL names alike) in a row are solved as one
+    batch; a point whose tentacle differs from the one before starts straight.
+
     :param warm: each point from the one before (default: as the study's model.start says)
     """
-    spec = study.tentacle
-    model = TentacleModel(spec, dof=study.dof, sublinks=study.sublinks,
-                          gravity_m_s2=study.gravity_m_s2)
-    chain = model.chain(study.inserted_m)
     count = len(next(iter(points.values())))
+    directions, fields = _directions_and_fields(study, points, count)
+    interest = study.points_of_interest_m
+    names = [*COLUMNS, *(f'poi_{k}_{a}_m' for k in range(len(interest)) for a in 'xyz')]
+    columns = {name: [] for name in names}
+    for start, stop, tentacle, inserted_m, backbone_m in _tentacles(study, points, count):
+        model = TentacleModel(tentacle, dof=study.dof, sublinks=study.sublinks,
+                              gravity_m_s2=study.gravity_m_s2, backbone_m=backbone_m)
+        chain = model.chain(inserted_m)
+        solved = batch.solve(chain, directions[start:stop], fields[start:stop],
+                             model.gravity_m_s2, dof=model.dof, tol=model.tol,
+                             max_iterations=model.max_iterations, points=bool(interest),
+                             warm=study.warm if warm is None else warm)
+        for name, values in zip(COLUMNS, (*solved.tips_m.T, solved.converged, solved.stable,
+                                          solved.stability)):
+            columns[name].append(values)
+        along = np.concatenate([[0.0], np.cumsum(chain.lengths_m)])   # the joints' arc length
+        for k, s in enumerate(interest):
+            link = min(max(int(np.searchsorted(along, s, side='right')) - 1, 0), chain.size - 1)
+            w = (s - along[link]) / chain.lengths_m[link]
+            at = (1 - w) * solved.points_m[:, link] + w * solved.points_m[:, link + 1]
+            for axis, name in enumerate('xyz'):
+                columns[f'poi_{k}_{name}_m'].append(at[:, axis])
+    return {**points, **{name: np.concatenate(parts) for name, parts in columns.items()}}
+
+
+def _directions_and_fields(study, points, count):
+    """Return each point's magnetisation directions (count, segments, 3) and field (count, 3)."""
     own = np.array([s.magnetisation_a_per_m / max(np.linalg.norm(s.magnetisation_a_per_m),
-                                                  1e-300) for s in spec.segments])
+                                                  1e-300) for s in study.tentacle.segments])
     directions = np.repeat(own[None], count, axis=0)
     fields = np.repeat(study.field_t[None], count, axis=0)
     for name, values in points.items():
@@ -43,23 +72,45 @@ def solve_at(study, points, warm=None):
             angle = np.radians(values)
             directions[:, int(which)] = np.column_stack([np.cos(angle), np.sin(angle),
                                                          np.zeros(count)])
-        else:
+        elif kind == 'field_t':
             fields[:, AXES[which]] = values
-    interest = study.points_of_interest_m
-    solved = batch.solve(chain, directions, fields, model.gravity_m_s2, dof=model.dof,
-                         tol=model.tol, max_iterations=model.max_iterations,
-                         points=bool(interest),
-                         warm=study.warm if warm is None else warm)
-    tips = solved.tips_m
-    out = {**points, 'tip_x_m': tips[:, 0], 'tip_y_m': tips[:, 1], 'tip_z_m': tips[:, 2],
-           'converged': solved.converged, 'stable': solved.stable,
-           'stability': solved.stability}
-    if interest:
-        along = np.concatenate([[0.0], np.cumsum(chain.lengths_m)])   # the joints' arc length
-        for k, s in enumerate(interest):
-            link = min(max(int(np.searchsorted(along, s, side='right')) - 1, 0), chain.size - 1)
-            w = (s - along[link]) / chain.lengths_m[link]
-            at = (1 - w) * solved.points_m[:, link] + w * solved.points_m[:, link + 1]
-            for axis, name in enumerate('xyz'):
-                out[f'poi_{k}_{name}_m'] = at[:, axis]
-    return out
+    return directions, fields
+
+
+def _tentacles(study, points, count):
+    """Yield (start, stop, TentacleSpec, inserted_m, backbone_m) of each run of points alike."""
+    names = [n for n in points if n.partition('.')[0] in STRUCTURAL]
+    if not names:
+        yield 0, count, study.tentacle, study.inserted_m, 0.0
+        return
+    values = np.column_stack([points[n] for n in names])
+    edges = [0, *(np.flatnonzero(np.any(values[1:] != values[:-1], axis=1)) + 1), count]
+    for start, stop in zip(edges[:-1], edges[1:]):
+        row = dict(zip(names, values[start]))
+        yield (start, stop, varied_tentacle(study.tentacle, row),
+               row.get('inserted_m', study.inserted_m), row.get('backbone_m', 0.0))
+
+
+def varied_tentacle(spec, row):
+    """Return spec with its segments as a row {structural name: value} of a study makes them."""
+    segments = list(spec.segments)
+    for name, value in row.items():
+        kind, _, which = name.partition('.')
+        if not which:
+            continue   # inserted_m, backbone_m: the chain's, not the tentacle's
+        k = int(which)
+        segment = segments[k]
+        bend_1, bend_2, twist = segment.modulus_pa
+        if kind == 'youngs_modulus_pa':
+            segment = replace(segment, modulus_pa=(value, value, value))
+        elif kind == 'bend_modulus_pa':
+            segment = replace(segment, modulus_pa=(value, value, twist))
+        elif kind == 'twist_modulus_pa':
+            segment = replace(segment, modulus_pa=(bend_1, bend_2, value))
+        elif kind == 'remanence_t':
+            m = segment.magnetisation_a_per_m
+            segment = replace(segment, magnetisation_a_per_m=value / MU0 * m / np.linalg.norm(m))
+        elif kind == 'length_m':
+            segment = replace(segment, length_m=value)
+        segments[k] = segment
+    return replace(spec, segments=tuple(segments))

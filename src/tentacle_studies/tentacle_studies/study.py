@@ -15,12 +15,18 @@ A design study file (../shared/DESIGN.md, "Design studies"): what is fixed, what
 
 Varied names: ``magnetisation_deg.K`` (segment K's magnetisation direction, at that angle in
 its link x-y plane, deg, with the tentacle file's remanence) and ``field_t.x``, ``.y``,
-``.z`` (tesla, world frame). A grid is every combination, the last name varying fastest, so
-that neighbouring points are warm starts for each other; a Latin hypercube or random sample
-draws N points: a range uniformly between its ends (its count is the grid's only), a list
-one of its values. ``points_of_interest_m`` adds each such point's position along the body
-(arc length from the base) to the table: columns ``poi_K_x_m``, ``_y_m``, ``_z_m`` after
-DESIGN.md's (the thesis' chapter 2 measured its deflections at the magnets' centres).
+``.z`` (tesla, world frame); and what makes the tentacle itself (STRUCTURAL):
+``youngs_modulus_pa.K`` (segment K's modulus, Pa, bending and twist alike),
+``bend_modulus_pa.K`` and ``twist_modulus_pa.K`` (its bending moduli, or its twist one:
+the pseudo-moduli of a reinforced segment), ``remanence_t.K`` (its remanence along its
+file's direction, T), ``length_m.K`` (m), ``inserted_m`` and ``backbone_m`` (how far the
+backbone reaches past the base, m; a tentacle with a backbone). A grid is every
+combination, the last name varying fastest, so that neighbouring points are warm starts for
+each other; a Latin hypercube or random sample draws N points: a range uniformly between
+its ends (its count is the grid's only), a list one of its values. ``points_of_interest_m``
+adds each such point's position along the body (arc length from the base) to the table:
+columns ``poi_K_x_m``, ``_y_m``, ``_z_m`` after DESIGN.md's (the thesis' chapter 2 measured
+its deflections at the magnets' centres).
 
 ``model.start`` (beyond DESIGN.md): ``previous`` (default) solves each point from the one
 before, as a rig sweeping its field goes; ``straight`` solves each from the straight body,
@@ -41,6 +47,12 @@ from tentacle_model.user_files import FieldReader, load_yaml, read_capped
 import yaml
 
 MAX_FILE_BYTES = 64 * 1024
+SEGMENT_NAMES = ('magnetisation_deg', 'youngs_modulus_pa', 'bend_modulus_pa',
+                 'twist_modulus_pa', 'remanence_t', 'length_m')
+STRUCTURAL = ('youngs_modulus_pa', 'bend_modulus_pa', 'twist_modulus_pa', 'remanence_t',
+              'length_m', 'inserted_m', 'backbone_m')
+"""Name kinds that change the tentacle (its chain) from point to point."""
+POSITIVE = ('youngs_modulus_pa', 'bend_modulus_pa', 'twist_modulus_pa', 'length_m')
 MAX_POINTS = 10_000_000   # a study's points; each needs its row of every column in memory
 AXES = {'x': 0, 'y': 1, 'z': 2}
 
@@ -63,6 +75,16 @@ class Varied:
     def length(self):
         """Return how many values the grid takes of this name (None: a range without count)."""
         return len(self.values) if self.values is not None else self.count
+
+    @property
+    def least(self):
+        """Return the smallest value this name takes."""
+        return min(self.values) if self.values is not None else min(self.low, self.high)
+
+    @property
+    def most(self):
+        """Return the largest value this name takes."""
+        return max(self.values) if self.values is not None else max(self.low, self.high)
 
     def grid(self):
         """Return the grid's values of this name (a range: count evenly spaced, ends in)."""
@@ -182,16 +204,24 @@ def load_study(path):
     if start not in ('previous', 'straight'):
         reader.fail('model.start', f"{start!r} is not 'previous' or 'straight'")
     varied = _varied(reader, doc['vary'], tentacle)
+    shortest = tentacle.length_m - sum(
+        tentacle.segments[int(v.name.split('.')[1])].length_m - v.least
+        for v in varied if v.name.startswith('length_m.'))
+    for v in varied:
+        if v.name in ('inserted_m', 'backbone_m') and v.most > shortest * (1 + 1e-12):
+            reader.fail(f'vary.{v.name}', f'{v.most:g} m is more than the tentacle '
+                                          f'({shortest:g} m at its shortest)')
     sample = _sample(reader, doc.get('sample', 'grid'), varied)
     interest = doc.get('points_of_interest_m') or []
     if not isinstance(interest, list):
         reader.fail('points_of_interest_m', f'expected a list of arc lengths, got {interest!r}')
     interest = tuple(reader.number(v, f'points_of_interest_m[{i}]', allow_zero=True)
                      for i, v in enumerate(interest))
+    least_inserted = min([inserted] + [v.least for v in varied if v.name == 'inserted_m'])
     for i, s in enumerate(interest):
-        if s > inserted * (1 + 1e-12):
+        if s > least_inserted * (1 + 1e-12):
             reader.fail(f'points_of_interest_m[{i}]', f'{s:g} m is past the inserted '
-                                                      f'{inserted:g} m')
+                                                      f'{least_inserted:g} m')
     study = Study(str(doc['name']), compute, path, hashlib.sha256(data).hexdigest(), tentacle,
                   inserted, field, dof, sublinks, gravity, varied, sample, interest,
                   start == 'previous')
@@ -208,30 +238,46 @@ def _varied(reader, vary, tentacle):
     for name, spec in vary.items():
         where = f'vary.{name}'
         kind, _, which = str(name).partition('.')
-        if kind == 'magnetisation_deg':
+        if kind in SEGMENT_NAMES:
             if not which.isdigit() or int(which) >= len(tentacle.segments):
                 reader.fail(where, f'segment {which!r}: the tentacle has segments 0 to '
                                    f'{len(tentacle.segments) - 1}')
-            if not np.any(tentacle.segments[int(which)].magnetisation_a_per_m):
-                reader.fail(where, f'segment {which} is not magnetised: nothing to turn')
-        elif kind != 'field_t' or which not in AXES:
-            reader.fail(where, 'unknown name: magnetisation_deg.K (segment K) or '
-                               'field_t.x, .y, .z')
+            if kind in ('magnetisation_deg', 'remanence_t') and not np.any(
+                    tentacle.segments[int(which)].magnetisation_a_per_m):
+                reader.fail(where, f'segment {which} is not magnetised: it has no direction')
+        elif kind == 'backbone_m' and tentacle.backbone is None:
+            reader.fail(where, 'the tentacle has no backbone (its file has no backbone: block)')
+        elif not (kind == 'field_t' and which in AXES) and not (
+                kind in ('inserted_m', 'backbone_m') and not which):
+            reader.fail(where, 'unknown name: magnetisation_deg.K, youngs_modulus_pa.K, '
+                               'bend_modulus_pa.K, twist_modulus_pa.K, remanence_t.K, '
+                               'length_m.K (segment K), field_t.x, .y, .z, inserted_m or '
+                               'backbone_m')
         if isinstance(spec, list):
             if not spec:
                 reader.fail(where, 'an empty list')
-            out.append(Varied(str(name), tuple(reader.number(v, f'{where}[{i}]',
-                                                             positive=False)
-                                               for i, v in enumerate(spec))))
+            out.append(_checked(reader, where, kind, Varied(
+                str(name), tuple(reader.number(v, f'{where}[{i}]', positive=False)
+                                 for i, v in enumerate(spec)))))
             continue
         spec = reader.mapping(spec, where, ('from', 'to', 'count'), ('from', 'to'))
         count = spec.get('count')
         if count is not None and (isinstance(count, bool) or not isinstance(count, int)
                                   or count < 1):
             reader.fail(f'{where}.count', f'{count!r} is not a whole number of at least 1')
-        out.append(Varied(str(name), None, reader.number(spec['from'], f'{where}.from', False),
-                          reader.number(spec['to'], f'{where}.to', False), count))
+        out.append(_checked(reader, where, kind, Varied(
+            str(name), None, reader.number(spec['from'], f'{where}.from', False),
+            reader.number(spec['to'], f'{where}.to', False), count)))
     return tuple(out)
+
+
+def _checked(reader, where, kind, varied):
+    """Return varied, its values in the name's range (a modulus or length above zero...)."""
+    if kind in POSITIVE and varied.least <= 0:
+        reader.fail(where, f'{varied.least:g}: a {kind} must be above zero')
+    if kind in ('remanence_t', 'inserted_m', 'backbone_m') and varied.least < 0:
+        reader.fail(where, f'{varied.least:g}: a {kind} cannot be negative')
+    return varied
 
 
 def _sample(reader, sample, varied):

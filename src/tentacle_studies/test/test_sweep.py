@@ -12,8 +12,10 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 from tentacle_model.model import TentacleModel
-from tentacle_studies import engines, sweep_cli
-from tentacle_studies.study import load_study
+from tentacle_model.tentacle_spec import load_tentacle
+from tentacle_studies import engines, equilibria, sweep_cli
+from tentacle_studies.study import load_study, StudyError
+import yaml
 
 STUDY = """name: two_magnets
 field_t: [0.0, 0.005, 0.0]
@@ -191,3 +193,73 @@ def test_points_of_interest_lie_on_the_body(write_study, tmp_path):
     assert np.cumsum(lengths)[0] < 0.0175 < np.cumsum(lengths)[1]
     distance = np.linalg.norm(poi[1] - poi[0], axis=1)
     assert np.all(distance <= 0.0175 + 1e-12) and np.all(distance > 0.01)
+
+
+STRUCTURAL_STUDY = """name: structure
+field_t: [0.0, 0.006, 0.004]
+model: {dof: 3, sublinks: 2}
+vary:
+  twist_modulus_pa.4: [1.0e+5, 1.0e+7]
+  bend_modulus_pa.1: [2.0e+5, 5.0e+5]
+  remanence_t.3: [0.05, 0.12]
+  length_m.2: [0.008, 0.013]
+  inserted_m: [0.035, 0.048]
+"""
+
+
+def test_structural_names_make_the_tentacle_a_file_would(write_study, tmp_path):
+    study = load_study(write_study(STRUCTURAL_STUDY))
+    rows = equilibria.solve_points(study, 0, study.size)
+    assert study.size == 32 and rows['converged'].all()
+    base = yaml.safe_load((ROOT / 'config' / 'tentacles' / 'braided_chapter5.yaml').read_text())
+    for p in range(study.size):   # each point a tentacle of its own: from straight
+        document = yaml.safe_load(yaml.safe_dump(base))
+        segments = document['segments']
+        segments[4]['youngs_modulus_pa']['twist'] = float(rows['twist_modulus_pa.4'][p])
+        segments[1]['youngs_modulus_pa']['bend_1'] = float(rows['bend_modulus_pa.1'][p])
+        segments[1]['youngs_modulus_pa']['bend_2'] = float(rows['bend_modulus_pa.1'][p])
+        segments[3]['magnetisation']['remanence_t'] = float(rows['remanence_t.3'][p])
+        segments[2]['length_m'] = float(rows['length_m.2'][p])
+        path = tmp_path / 'made.yaml'
+        path.write_text(yaml.safe_dump(document))
+        model = TentacleModel(load_tentacle(path), dof=3, sublinks=2)
+        eq = model.solve(float(rows['inserted_m'][p]), study.field_t).equilibrium
+        np.testing.assert_allclose([rows[f'tip_{a}_m'][p] for a in 'xyz'], eq.points_m[-1],
+                                   rtol=0, atol=1e-12)
+        assert rows['stability'][p] == pytest.approx(eq.stability, rel=1e-9, abs=1e-15)
+    tips = np.column_stack([rows['tip_x_m'], rows['tip_y_m']])
+    assert np.ptp(tips, axis=0).max() > 0.01   # the names change the tentacle
+
+
+@pytest.mark.parametrize('vary, message', [
+    ('remanence_t.0: [0.1]', None),
+    ('youngs_modulus_pa.0: [0.0, 1.0e+5]', 'youngs_modulus_pa must be above zero'),
+    ('length_m.7: [0.01]', "segment '7'"),
+    ('inserted_m: [0.06]', '0.06 m is more than the tentacle (0.05 m at its shortest)'),
+    ('length_m.0: [0.002, 0.01]\n  inserted_m: [0.045]', 'at its shortest'),
+    ('backbone_m: [0.01]', 'the tentacle has no backbone'),
+    ('remanence_t.2: [-0.1]', 'remanence_t cannot be negative'),
+    ('inserted_m.2: [0.01]', 'unknown name'),
+])
+def test_structural_names_are_checked_against_the_tentacle(write_study, vary, message):
+    path = write_study(f'name: x\nvary:\n  {vary}\n')
+    if message is None:
+        assert load_study(path).names == [vary.split(':')[0]]
+        return
+    with pytest.raises(StudyError) as caught:
+        load_study(path)
+    assert message in str(caught.value), str(caught.value)
+
+
+def test_a_backbone_reach_is_the_models(tmp_path):
+    path = tmp_path / 'backbone.yaml'
+    path.write_text(f'name: reach\ntentacle: {ROOT / "config" / "tentacles" / "vsr_chapter6.yaml"}'
+                    '\nfield_t: [0.0, 0.015, 0.0]\nmodel: {dof: 1, sublinks: 2}\n'
+                    'vary:\n  backbone_m: [0.0, 0.02, 0.04]\n')
+    study = load_study(path)
+    rows = equilibria.solve_points(study, 0, study.size)
+    for p, reach in enumerate(rows['backbone_m']):
+        model = TentacleModel(study.tentacle, dof=1, sublinks=2, backbone_m=reach)
+        eq = model.solve(study.tentacle.length_m, study.field_t).equilibrium
+        np.testing.assert_allclose(rows['tip_x_m'][p], eq.points_m[-1][0], rtol=0, atol=1e-12)
+    assert rows['tip_x_m'][0] != rows['tip_x_m'][2]   # the backbone stiffens the base

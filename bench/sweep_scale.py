@@ -7,7 +7,8 @@ grid of its two distal magnets' angles (24 x 24, repeated), tentacle_model.batch
 one TentacleModel.solve a point, side by side. Then tentacle-sweep's engines on a study of
 518,400 points (100 fields x 72 x 72 angles, 3-DoF): in this process and on a LocalCluster of
 2 single-threaded workers, at 2000, 8000 and 32000 points a chunk (the cluster's start
-included: it is what a run pays).
+included: it is what a run pays); and a plan study (16 seeds of thesis scene ch3_a, a plan
+each) at 1, 2, 4 and 8 points a chunk.
 
 Run: .venv/bin/python bench/sweep_scale.py
 """
@@ -35,6 +36,13 @@ vary:
   field_t.y: {{from: 0.001, to: 0.010, count: 100}}
   magnetisation_deg.3: {{from: 0, to: 355, count: 72}}
   magnetisation_deg.4: {{from: 0, to: 355, count: 72}}
+"""
+
+PLAN_STUDY = f"""name: plan_scale
+compute: plan
+scene: {ROOT / 'config' / 'scenes' / 'ch3_a.yaml'}
+vary:
+  seed: [{', '.join(map(str, range(16)))}]
 """
 
 
@@ -75,13 +83,13 @@ def one_core():
               f'point {each:7.0f} a second ({in_batch / each:.1f}x)')
 
 
-def engines():
+def engines(text, points, chunks, what):
     """Print tentacle-sweep's points per second here and on 2 local workers, by chunk size."""
-    print('tentacle-sweep, 518,400 points (3-DoF), wall time of the run:')
+    print(f'tentacle-sweep, {points:,} {what}, wall time of the run:')
     with tempfile.TemporaryDirectory() as tmp:
         study = pathlib.Path(tmp) / 'study.yaml'
-        study.write_text(STUDY)
-        for chunk in (2000, 8000, 32000):
+        study.write_text(text)
+        for chunk in chunks:
             for workers in (1, 2):
                 out = pathlib.Path(tmp) / f'out_{chunk}_{workers}'
                 t0 = time.perf_counter()
@@ -91,9 +99,10 @@ def engines():
                 assert code == 0
                 where = 'this process' if workers == 1 else '2 local workers'
                 print(f'  {chunk:5d} points a chunk, {where:15s}: {seconds:5.2f} s, '
-                      f'{518400 / seconds:7.0f} points a second', flush=True)
+                      f'{points / seconds:9.2f} points a second', flush=True)
 
 
 if __name__ == '__main__':
     one_core()
-    engines()
+    engines(STUDY, 518_400, (2000, 8000, 32000), 'equilibrium points (3-DoF)')
+    engines(PLAN_STUDY, 16, (1, 2, 4, 8), 'plan points (thesis scene ch3_a, 16 seeds)')

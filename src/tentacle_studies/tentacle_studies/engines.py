@@ -11,7 +11,15 @@ chunks, and so the results, are the same: each chunk's first point starts straig
 import contextlib
 import os
 
-from tentacle_studies.equilibria import solve_points
+from tentacle_studies import equilibria
+
+
+def solve_points(study, start, stop):
+    """Return the table columns of a study's points start..stop: equilibria or plans."""
+    if study.compute == 'plan':
+        from tentacle_studies import plans   # the planner: plan studies only
+        return plans.plan_points(study, start, stop)
+    return equilibria.solve_points(study, start, stop)
 
 
 def local_cores():

@@ -28,6 +28,10 @@ adds each such point's position along the body (arc length from the base) to the
 columns ``poi_K_x_m``, ``_y_m``, ``_z_m`` after DESIGN.md's (the thesis' chapter 2 measured
 its deflections at the magnets' centres).
 
+A plan study (``compute: plan``, a ``scene:`` file in place of ``tentacle:``, its inserted
+length, field and model the scene's) varies ``youngs_modulus_pa.K``, ``bend_modulus_pa.K``,
+``twist_modulus_pa.K``, ``remanence_t.K`` and ``seed`` (a list of whole numbers): plans.py.
+
 ``model.start`` (beyond DESIGN.md): ``previous`` (default) solves each point from the one
 before, as a rig sweeping its field goes; ``straight`` solves each from the straight body,
 a tentacle of its own with its field switched on: where several equilibria are stable, the
@@ -118,6 +122,7 @@ class Study:
     sample: tuple            # ('grid', None, None) or (kind, count, seed)
     points_of_interest_m: tuple = ()   # arc lengths from the base, m
     warm: bool = True        # model.start: previous (True) or straight
+    scene: object = None     # a plan study's Scene (tentacle_planner.scene)
 
     @property
     def names(self):
@@ -176,9 +181,10 @@ def load_study(path):
                                              'sample', 'points_of_interest_m'),
                          ('name', 'vary'))
     compute = doc.get('compute', 'equilibrium')
+    if compute == 'plan':
+        return _plan_study(reader, doc, path, data)
     if compute != 'equilibrium':
-        reader.fail('compute', f'{compute!r}: this version computes equilibria only '
-                               "('equilibrium')")
+        reader.fail('compute', f"{compute!r}: 'equilibrium' or 'plan'")
     if 'tentacle' not in doc or 'scene' in doc:
         reader.fail('tentacle', 'an equilibrium study names its tentacle file (and no scene)')
     try:
@@ -230,6 +236,41 @@ def load_study(path):
     return study
 
 
+PLAN_NAMES = ('youngs_modulus_pa', 'bend_modulus_pa', 'twist_modulus_pa', 'remanence_t',
+              'seed')
+
+
+def _plan_study(reader, doc, path, data):
+    """Return the Study of a plan study: its scene, what varies of its tentacle, seeds."""
+    from tentacle_planner.errors import PlanInputError   # plan studies only
+    from tentacle_planner.scene import load_scene
+    if 'scene' not in doc or 'tentacle' in doc:
+        reader.fail('scene', 'a plan study names its scene file (and no tentacle)')
+    for key in ('inserted_m', 'field_t', 'model', 'points_of_interest_m'):
+        if key in doc:
+            reader.fail(key, 'a plan study takes it from its scene: leave it out')
+    try:
+        scene = load_scene(path.parent / str(doc['scene']))
+    except PlanInputError as exc:
+        reader.fail('scene', str(exc))
+    vary = doc['vary']
+    for name in (vary if isinstance(vary, dict) else {}):
+        if str(name).partition('.')[0] not in PLAN_NAMES:
+            reader.fail(f'vary.{name}', 'a plan study varies youngs_modulus_pa.K, '
+                                        'bend_modulus_pa.K, twist_modulus_pa.K, '
+                                        'remanence_t.K (segment K) or seed')
+    varied = _varied(reader, vary, scene.tentacle)
+    sample = _sample(reader, doc.get('sample', 'grid'), varied)
+    settings = scene.model
+    study = Study(str(doc['name']), 'plan', path, hashlib.sha256(data).hexdigest(),
+                  scene.tentacle, scene.tentacle.length_m, np.zeros(3), settings.dof,
+                  settings.sublinks, np.asarray(settings.gravity_m_s2, float), varied, sample,
+                  scene=scene)
+    if study.size > MAX_POINTS:
+        reader.fail('vary', f'{study.size} points: at most {MAX_POINTS}')
+    return study
+
+
 def _varied(reader, vary, tentacle):
     """Return the Varied of a vary block, each name checked against the tentacle."""
     if not isinstance(vary, dict) or not vary:
@@ -245,6 +286,8 @@ def _varied(reader, vary, tentacle):
             if kind in ('magnetisation_deg', 'remanence_t') and not np.any(
                     tentacle.segments[int(which)].magnetisation_a_per_m):
                 reader.fail(where, f'segment {which} is not magnetised: it has no direction')
+        elif kind == 'seed' and not which:
+            pass
         elif kind == 'backbone_m' and tentacle.backbone is None:
             reader.fail(where, 'the tentacle has no backbone (its file has no backbone: block)')
         elif not (kind == 'field_t' and which in AXES) and not (
@@ -277,6 +320,9 @@ def _checked(reader, where, kind, varied):
         reader.fail(where, f'{varied.least:g}: a {kind} must be above zero')
     if kind in ('remanence_t', 'inserted_m', 'backbone_m') and varied.least < 0:
         reader.fail(where, f'{varied.least:g}: a {kind} cannot be negative')
+    if kind == 'seed' and (varied.values is None or varied.least < 0 or any(
+            v != int(v) for v in varied.values)):
+        reader.fail(where, 'seeds are a list of whole numbers from 0')
     return varied
 
 

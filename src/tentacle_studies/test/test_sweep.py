@@ -263,3 +263,53 @@ def test_a_backbone_reach_is_the_models(tmp_path):
         eq = model.solve(study.tentacle.length_m, study.field_t).equilibrium
         np.testing.assert_allclose(rows['tip_x_m'][p], eq.points_m[-1][0], rtol=0, atol=1e-12)
     assert rows['tip_x_m'][0] != rows['tip_x_m'][2]   # the backbone stiffens the base
+
+
+PLAN_STUDY = """name: plans
+compute: plan
+scene: {scene}
+vary:
+  remanence_t.0: [0.04, 0.0535]
+  seed: [0, 1]
+"""
+
+
+def test_a_plan_study_plans_each_point_as_the_planner_does(tmp_path):
+    from dataclasses import replace
+    from tentacle_planner.planner import plan_scene, shape_rms
+    from tentacle_planner.scene import load_scene
+    study_file = tmp_path / 'plans.yaml'
+    study_file.write_text(PLAN_STUDY.format(scene=ROOT / 'config' / 'scenes' / 'ch3_a.yaml'))
+    assert sweep_cli.main([str(study_file), '--out', str(tmp_path / 'out'), '--workers', '1',
+                           '--csv']) == 0
+    rows = pq.read_table(tmp_path / 'out' / 'results.parquet').to_pydict()
+    assert list(rows) == ['remanence_t.0', 'seed', 'shape_rms_m', 'recheck_rms_m', 'flags']
+    scene = load_scene(ROOT / 'config' / 'scenes' / 'ch3_a.yaml')
+    document = yaml.safe_load(scene.tentacle_file.read_text())
+    for p in range(4):
+        document['segments'][0]['magnetisation']['remanence_t'] = rows['remanence_t.0'][p]
+        path = tmp_path / 'tentacle.yaml'
+        path.write_text(yaml.safe_dump(document))
+        made = replace(scene, tentacle=load_tentacle(path), playback_step_m=None)
+        result = plan_scene(made, seed=int(rows['seed'][p]), workers=1)
+        assert rows['shape_rms_m'][p] == pytest.approx(shape_rms(made, result.plan.steps),
+                                                       rel=1e-9)
+        finer = [rms for what, rms in result.verification if what.startswith('higher')]
+        assert rows['recheck_rms_m'][p] == pytest.approx(finer[0], rel=1e-9)
+        assert rows['flags'][p] == '; '.join(result.flags)
+    assert (tmp_path / 'out' / 'plot.png').exists()
+
+
+@pytest.mark.parametrize('text, message', [
+    ('vary: {field_t.y: [0.0]}', 'a plan study varies youngs_modulus_pa.K'),
+    ('field_t: [0, 0, 0]\nvary: {seed: [0]}', 'field_t: a plan study takes it from its scene'),
+    ('vary: {seed: [0.5]}', 'seeds are a list of whole numbers'),
+    ('vary: {seed: {from: 0, to: 3, count: 4}}', 'seeds are a list of whole numbers'),
+])
+def test_a_plan_study_is_checked(tmp_path, text, message):
+    path = tmp_path / 'plans.yaml'
+    path.write_text(f'name: p\ncompute: plan\nscene: {ROOT / "config" / "scenes" / "ch3_a.yaml"}'
+                    f'\n{text}\n')
+    with pytest.raises(StudyError) as caught:
+        load_study(path)
+    assert message in str(caught.value), str(caught.value)

@@ -210,6 +210,9 @@ def load_study(path):
     if start not in ('previous', 'straight'):
         reader.fail('model.start', f"{start!r} is not 'previous' or 'straight'")
     varied = _varied(reader, doc['vary'], tentacle)
+    if any(v.name == 'seed' for v in varied):
+        reader.fail('vary.seed', 'only a plan study (compute: plan) has a seed: an equilibrium '
+                                 'has none')
     shortest = tentacle.length_m - sum(
         tentacle.segments[int(v.name.split('.')[1])].length_m - v.least
         for v in varied if v.name.startswith('length_m.'))

@@ -57,6 +57,7 @@ sample: {{{kind}: 200, seed: 7}}
     ('name: x\nvary: {field_t.y: [0]}\nsample: {random: 0}\n', 'sample.random'),
     ('name: x\ncompute: plan\nvary: {field_t.y: [0]}\n', 'a plan study names its scene'),
     ('name: x\ncompute: trajectory\nvary: {field_t.y: [0]}\n', "'equilibrium' or 'plan'"),
+    ('name: x\nvary: {seed: [0, 1]}\n', 'vary.seed: only a plan study (compute: plan) has a seed'),
     ('name: x\nvary: {field_t.y: [0]}\nmodel: {dof: 2}\n', 'model.dof'),
     ('name: x\nvary: {field_t.y: [0]}\nmodel: {start: cold}\n',
      "model.start: 'cold' is not 'previous' or 'straight'"),

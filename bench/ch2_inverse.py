@@ -123,10 +123,9 @@ def main():
     network = networks[0]
 
     names = grid.names
-    all_angles, all_deflections = grid.points(np.ones_like(mask))
 
     def nearest(want):
-        return all_angles[np.argmin(np.abs(all_deflections - want).sum(axis=1))]
+        return grid.nearest(want)[0]
 
     def network_alone(want):
         return network.angles_rad(want)[0]

@@ -44,6 +44,14 @@ class Babble:
                                   for k, a in enumerate(self.angles_deg)])
         return angles, self.deflections_m[mask]
 
+    def nearest(self, requested_m):
+        """Return (N, k) angles, rad: for each requested shape (N, k), m, the grid's closest."""
+        shapes = self.deflections_m.reshape(-1, self.deflections_m.shape[-1])
+        index = [np.argmin(np.abs(shapes - want).sum(axis=1))
+                 for want in np.atleast_2d(requested_m)]
+        place = np.unravel_index(index, self.deflections_m.shape[:-1])
+        return np.column_stack([np.radians(a)[i] for a, i in zip(self.angles_deg, place)])
+
 
 def deflections(study, columns):
     """Return (N, k) each point of interest's deflection from a table's columns, m."""

@@ -56,7 +56,6 @@ def main(args=None):
     except (StudyError, ResultsError, inverse.BabbleError, ValueError) as exc:
         print(f'tentacle-inverse: {exc}', file=sys.stderr)
         return 2
-    angles, deflections = grid.points(np.ones(grid.deflections_m.shape[:-1], dtype=bool))
     t0 = time.perf_counter()
     if opts.method == 'network':
         mask, _ = inverse.redundancy_mask(grid)
@@ -65,8 +64,7 @@ def main(args=None):
               f'points in {time.perf_counter() - t0:.1f} s')
         answers = network.angles_rad(requested)
     else:
-        nearest = angles[[np.argmin(np.abs(deflections - want).sum(axis=1))
-                          for want in requested]]
+        nearest = grid.nearest(requested)
         answers = nearest if opts.method == 'lookup' else np.array(
             [inverse.direct(study, grid.names, want, start).angles_rad
              for want, start in zip(requested, nearest)])

@@ -36,6 +36,7 @@ class Batch:
     stability: np.ndarray     # (P,) smallest Hessian eigenvalue, N m / rad^2 (nan: unknown)
     iterations: np.ndarray    # (P,) Newton steps
     points_m: np.ndarray      # (P, n + 1, 3) joints and tip, base first (if asked; else None)
+    twist_stability: np.ndarray = None   # (P,) planar points, if asked: see solve
 
     @property
     def stable(self):
@@ -44,7 +45,7 @@ class Batch:
 
 
 def solve(chain, directions, fields_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=3, tol=1e-9,
-          max_iterations=200, initial=None, points=False, warm=True):
+          max_iterations=200, initial=None, points=False, warm=True, twist=False):
     """
     Return the Batch of a chain's equilibria at P points, each warm-started from the last.
 
@@ -60,6 +61,11 @@ def solve(chain, directions, fields_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=3, tol=
     :param warm: start each point from the one before; False: every point from ``initial``
         (a tentacle of its own, its field switched on from rest: one equilibrium per point
         where several are stable, whatever order the points come in)
+    :param twist: with dof 1, also Batch.twist_stability: the smallest eigenvalue of the 3-DoF
+        Hessian at each planar equilibrium, N m / rad^2; below zero the planar shape is
+        unstable out of its plane, and twists (thesis chapter 4). nan where the point is not
+        converged or not planar (a magnet, the field or gravity out of the plane: the planar
+        shape is then no 3-DoF equilibrium)
     :raises ValueError: arrays of the wrong shape or not finite
     """
     directions = np.ascontiguousarray(directions, dtype=float)
@@ -75,6 +81,8 @@ def solve(chain, directions, fields_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=3, tol=
         raise ValueError('directions and fields must be finite')
     if dof not in (1, 3):
         raise ValueError(f'dof {dof} is not 1 or 3')
+    if twist and dof != 1:
+        raise ValueError('twist stability is that of planar equilibria: dof 1')
     gravity = np.asarray(gravity_m_s2, dtype=float)
     statics.check_size(chain.size, dof)
     statics.compile_kernels()
@@ -89,9 +97,11 @@ def solve(chain, directions, fields_t, gravity_m_s2=(0.0, 0.0, 0.0), dof=3, tol=
                  index.astype(np.intp), spatial.gravity_levers(chain),
                  chain.stiffness_n_m, directions, fields, gravity, tol, int(max_iterations),
                  newton, start, points, warm)
-    kernel = _spatial_points if dof == 3 else _planar_points
-    *solved, joints = kernel(*arguments)
-    return Batch(*solved, joints if points else None)
+    if dof == 3:
+        *solved, joints = _spatial_points(*arguments)
+        return Batch(*solved, joints if points else None)
+    *solved, joints, twisted = _planar_points(*arguments, twist)
+    return Batch(*solved, joints if points else None, twisted if twist else None)
 
 
 @numba.njit(cache=True)
@@ -146,10 +156,11 @@ def _spatial_points(base_rotation, base_position, lengths, magnitudes, segment_i
 @numba.njit(cache=True)
 def _planar_points(base_rotation, base_position, lengths, magnitudes, segment_index, levers,
                    stiffness, directions, fields, gravity, tol, max_iterations, newton, start,
-                   want_points, warm):
+                   want_points, warm, want_twist):
     """Solve every point with the planar joints (planar.loads per point): see solve."""
     count, n = fields.shape[0], lengths.shape[0]
     tips, converged, stability, iterations, joints = _outputs(count, n, want_points)
+    twisted = np.full(count if want_twist else 0, np.nan)
     k = stiffness[:, 0].copy()
     k_floor = max(1e-9 * np.max(k), 1e-300)
     axis_x, axis_y = base_rotation[:, 0].copy(), base_rotation[:, 1].copy()
@@ -183,8 +194,29 @@ def _planar_points(base_rotation, base_position, lengths, magnitudes, segment_in
             banded = planar_evaluate(x, k, a, b, False, True)[2]
             converged[p] = True
             stability[p] = smallest_eigenvalue(banded[1], banded[0, 1:])
+        if want_twist and converged[p]:
+            twisted[p] = _out_of_plane_stability(x, base_rotation, base_position, lengths,
+                                                 moments, levers, stiffness, fields[p],
+                                                 gravity, tol, k_floor)
         if not (converged[p] and np.all(np.isfinite(x))):
             x = np.zeros(n)
         if not warm:
             x = start.copy()
-    return tips, converged, stability, iterations, joints
+    return tips, converged, stability, iterations, joints, twisted
+
+
+@numba.njit(cache=True)
+def _out_of_plane_stability(headings, base_rotation, base_position, lengths, moments, levers,
+                            stiffness, field, gravity, tol, k_floor):
+    """Return the 3-DoF Hessian's smallest eigenvalue at a planar state (nan: not planar)."""
+    n = headings.shape[0]
+    q = np.zeros((n, 3))
+    q[0, 0] = headings[0]
+    for i in range(1, n):   # the planar joints' headings, as the 3-DoF joints' first angles
+        q[i, 0] = headings[i] - headings[i - 1]
+    state = _evaluate(q, base_rotation, base_position, lengths, moments, levers, stiffness,
+                      field, gravity, True)
+    # out of the plane, its gradient is zero only where every load lies in the plane
+    if np.max(np.abs(state[4])) > 1e3 * tol * max(state[8], k_floor):
+        return np.nan
+    return eigen.lowest(state[5])

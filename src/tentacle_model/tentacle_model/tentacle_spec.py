@@ -14,6 +14,12 @@ Format (see config/tentacles/cantilever.yaml)::
         youngs_modulus_pa: 1.0e5              # or {bend_1: ..., bend_2: ..., twist: ...}
         density_kg_m3: 1400.0
         magnetisation: {remanence_t: 0.107, direction: [1.0, 0.0, 0.0]}  # link frame; or none
+        reinforcement:                        # optional: fibres around the axis (chapter 4)
+          helices: 2                          # in pairs; or braid: K (yarns, interlaced)
+          angle_deg: 85.0                     # the fibres' angle to the axis
+          fibre_modulus_pa: 2.4e+9
+          fibre_diameter_m: 0.0004
+          radius_m: 0.00225                   # of the helix the fibres' centrelines lie on
     backbone:                      # optional stiffening backbone (thesis chapter 6)
       youngs_modulus_pa: 5.0e10
       diameter_m: 0.0005           # of each rod
@@ -22,14 +28,17 @@ Format (see config/tentacles/cantilever.yaml)::
 ``bend_1`` is bending in the base plane (about the link z axis), ``bend_2`` out of it (about
 link y), ``twist`` about the link axis (a pseudo-modulus with the polar moment, as thesis
 Table 5.1: a braid gives 500 / 500 / 10,000 kPa against 100 kPa unreinforced). A rectangular
-section has ``width_m`` along link y and ``height_m`` along link z.
+section has ``width_m`` along link y and ``height_m`` along link z. A reinforced segment's
+``youngs_modulus_pa`` is its matrix's; its pseudo-moduli add what the fibres carry
+(reinforcement.py: the closed-form estimate, stated there).
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 import pathlib
 
 import numpy as np
+from tentacle_model.reinforcement import KINDS, pseudo_moduli, Reinforcement
 from tentacle_model.user_files import FieldReader, load_yaml, read_capped
 import yaml
 
@@ -56,11 +65,13 @@ class Segment:
     area_m2: float
     second_moment_m4: tuple      # (I about link y, I about link z), m^4
     polar_moment_m4: float       # J, m^4
-    modulus_pa: tuple            # (bend_1 about z, bend_2 about y, twist), Pa
+    modulus_pa: tuple            # (bend_1 about z, bend_2 about y, twist), Pa: pseudo-moduli
     density_kg_m3: float
     magnetisation_a_per_m: np.ndarray  # (3,) M = Br / mu0 along the direction, link frame
     radius_m: float = 0.0        # the section's farthest edge from the axis (clearances), m
     width_m: float = 0.0         # its extent along link y, in the base plane (a camera), m
+    reinforcement: Reinforcement | None = None
+    matrix_modulus_pa: tuple = None   # modulus_pa without the reinforcement, Pa
 
     @property
     def bend_stiffness_n_m2(self):
@@ -95,7 +106,7 @@ class TentacleSpec:
 
 def _segment(read, raw, where):
     raw = read.mapping(raw, where, {'length_m', 'section', 'youngs_modulus_pa',
-                                    'density_kg_m3', 'magnetisation'},
+                                    'density_kg_m3', 'magnetisation', 'reinforcement'},
                        ('length_m', 'section', 'youngs_modulus_pa', 'density_kg_m3'))
     length = read.number(raw['length_m'], f'{where}.length_m')
     section = read.mapping(raw['section'], f'{where}.section',
@@ -133,8 +144,45 @@ def _segment(read, raw, where):
                          allow_zero=True)
         magnetisation = br / MU0 * read.vector(mag['direction'],
                                                f'{where}.magnetisation.direction', unit=True)
-    return Segment(length, area, (i_y, i_z), polar, moduli, density, magnetisation, radius,
-                   width)
+    fibres = None
+    if raw.get('reinforcement') is not None:
+        # the largest circle inside the section: the fibres lie within it
+        fibres = _reinforcement(read, raw['reinforcement'], f'{where}.reinforcement',
+                                d / 2 if 'diameter_m' in section else min(w, h) / 2)
+    return reinforced(Segment(length, area, (i_y, i_z), polar, moduli, density, magnetisation,
+                              radius, width), moduli, fibres)
+
+
+def reinforced(segment, matrix_pa, reinforcement):
+    """Return segment with matrix moduli matrix_pa (bend_1, bend_2, twist) and reinforcement."""
+    return replace(segment, reinforcement=reinforcement, matrix_modulus_pa=tuple(matrix_pa),
+                   modulus_pa=pseudo_moduli(matrix_pa, segment.second_moment_m4,
+                                            segment.polar_moment_m4, reinforcement))
+
+
+def _reinforcement(read, raw, where, inside_m):
+    """Return the Reinforcement of a segment's reinforcement block, its fibres inside_m."""
+    keys = ('angle_deg', 'fibre_modulus_pa', 'fibre_diameter_m', 'radius_m')
+    raw = read.mapping(raw, where, {*KINDS, *keys}, keys)
+    kinds = [k for k in KINDS if k in raw]
+    if len(kinds) != 1:
+        read.fail(where, 'give helices: N (bonded layers) or braid: N (interlaced yarns)')
+    count = raw[kinds[0]]
+    if isinstance(count, bool) or not isinstance(count, int) or count < 2 or count % 2:
+        # one hand alone would couple twist to stretch: fibres come in left and right pairs
+        read.fail(f'{where}.{kinds[0]}', f'{count!r} is not an even whole number from 2 '
+                                         '(fibres come in left- and right-handed pairs)')
+    angle = read.number(raw['angle_deg'], f'{where}.angle_deg', allow_zero=True)
+    if angle > 90:
+        read.fail(f'{where}.angle_deg', f'{angle:g} is more than 90 (the angle to the axis)')
+    d = read.number(raw['fibre_diameter_m'], f'{where}.fibre_diameter_m')
+    radius = read.number(raw['radius_m'], f'{where}.radius_m')
+    if radius + d / 2 > inside_m * (1 + 1e-9):
+        read.fail(f'{where}.radius_m', f'{radius:g} m with fibres {d:g} m thick is outside '
+                                       f'the section ({inside_m:g} m from the axis)')
+    return Reinforcement(kinds[0], count, math.radians(angle),
+                         read.number(raw['fibre_modulus_pa'], f'{where}.fibre_modulus_pa'),
+                         d, radius)
 
 
 def parse_tentacle(document, source='<tentacle>'):

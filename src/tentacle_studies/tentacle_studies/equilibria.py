@@ -1,12 +1,13 @@
 """The equilibria of a study's points, in batch (tentacle_model.batch): their table columns."""
 
 from dataclasses import replace
+import math
 
 import numpy as np
 from tentacle_model import batch
 from tentacle_model.model import TentacleModel
-from tentacle_model.tentacle_spec import MU0
-from tentacle_studies.study import AXES, STRUCTURAL
+from tentacle_model.tentacle_spec import MU0, reinforced
+from tentacle_studies.study import AXES, FIBRE_NAMES, STRUCTURAL
 
 COLUMNS = ('tip_x_m', 'tip_y_m', 'tip_z_m', 'converged', 'stable', 'stability')
 
@@ -15,8 +16,8 @@ def solve_points(study, start, stop):
     """
     Return {column: (k,) values} of points start..stop.
 
-    The varied names, then COLUMNS, then the points of interest (poi_K_x_m, ...: on the link
-    that holds each arc length, linearly).
+    The varied names, then COLUMNS, then twist_stability (model.twist_stability), then the
+    points of interest (poi_K_x_m, ...: on the link that holds each arc length, linearly).
 
     The points are solved in order, each from the one before (the first straight): a chunk
     of a grid is a run along its last name, so a solve is a few Newton steps. A study whose
@@ -37,7 +38,8 @@ def solve_at(study, points, warm=None):
     count = len(next(iter(points.values())))
     directions, fields = _directions_and_fields(study, points, count)
     interest = study.points_of_interest_m
-    names = [*COLUMNS, *(f'poi_{k}_{a}_m' for k in range(len(interest)) for a in 'xyz')]
+    names = [*COLUMNS, *(['twist_stability'] if study.twist else []),
+             *(f'poi_{k}_{a}_m' for k in range(len(interest)) for a in 'xyz')]
     columns = {name: [] for name in names}
     for start, stop, tentacle, inserted_m, backbone_m in _tentacles(study, points, count):
         model = TentacleModel(tentacle, dof=study.dof, sublinks=study.sublinks,
@@ -46,10 +48,12 @@ def solve_at(study, points, warm=None):
         solved = batch.solve(chain, directions[start:stop], fields[start:stop],
                              model.gravity_m_s2, dof=model.dof, tol=model.tol,
                              max_iterations=model.max_iterations, points=bool(interest),
-                             warm=study.warm if warm is None else warm)
+                             warm=study.warm if warm is None else warm, twist=study.twist)
         for name, values in zip(COLUMNS, (*solved.tips_m.T, solved.converged, solved.stable,
                                           solved.stability)):
             columns[name].append(values)
+        if study.twist:
+            columns['twist_stability'].append(solved.twist_stability)
         along = np.concatenate([[0.0], np.cumsum(chain.lengths_m)])   # the joints' arc length
         for k, s in enumerate(interest):
             link = min(max(int(np.searchsorted(along, s, side='right')) - 1, 0), chain.size - 1)
@@ -74,6 +78,11 @@ def _directions_and_fields(study, points, count):
                                                          np.zeros(count)])
         elif kind == 'field_t':
             fields[:, AXES[which]] = values
+    if 'field_angle_deg' in points:   # in the base's plane, from its direction to its normal
+        angle = np.radians(points['field_angle_deg'])
+        plane = study.tentacle.base_rotation[:, :2]
+        fields = points['field_strength_t'][:, None] * (
+            np.column_stack([np.cos(angle), np.sin(angle)]) @ plane.T)
     return directions, fields
 
 
@@ -92,18 +101,36 @@ def _tentacles(study, points, count):
 
 
 def varied_tentacle(spec, row):
-    """Return spec with its segments as a row {structural name: value} of a study makes them."""
+    """
+    Return spec with its segments as a row {structural name: value} of a study makes them.
+
+    A reinforced segment's youngs_modulus_pa is its matrix's and its fibres' names change
+    its fibres: its pseudo-moduli are derived again; bend_modulus_pa and twist_modulus_pa
+    then set pseudo-moduli outright.
+    """
     segments = list(spec.segments)
+    for k, segment in enumerate(segments):
+        fibres, matrix = segment.reinforcement, segment.matrix_modulus_pa
+        changed = False
+        for name, value in row.items():
+            kind, _, which = name.partition('.')
+            if kind in FIBRE_NAMES and fibres is not None and which in ('', str(k)):
+                key = {'fibre_angle_deg': 'angle_rad'}.get(kind, kind)
+                fibres = replace(fibres, **{key: math.radians(value)
+                                            if kind == 'fibre_angle_deg' else value})
+                changed = True
+            elif kind == 'youngs_modulus_pa' and which == str(k):
+                matrix, changed = (value, value, value), True
+        if changed:
+            segments[k] = reinforced(segment, matrix, fibres)
     for name, value in row.items():
         kind, _, which = name.partition('.')
-        if not which:
-            continue   # inserted_m, backbone_m: the chain's, not the tentacle's
+        if not which or kind in FIBRE_NAMES or kind == 'youngs_modulus_pa':
+            continue   # done above; inserted_m, backbone_m: the chain's, not the tentacle's
         k = int(which)
         segment = segments[k]
         bend_1, bend_2, twist = segment.modulus_pa
-        if kind == 'youngs_modulus_pa':
-            segment = replace(segment, modulus_pa=(value, value, value))
-        elif kind == 'bend_modulus_pa':
+        if kind == 'bend_modulus_pa':
             segment = replace(segment, modulus_pa=(value, value, twist))
         elif kind == 'twist_modulus_pa':
             segment = replace(segment, modulus_pa=(bend_1, bend_2, value))

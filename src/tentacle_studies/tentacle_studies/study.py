@@ -6,7 +6,8 @@ A design study file (../shared/DESIGN.md, "Design studies"): what is fixed, what
     tentacle: ../tentacles/chapter2.yaml
     inserted_m: 0.042                 # optional: all
     field_t: [0.0, 0.005, 0.0]        # unless varied
-    model: {dof: 1, sublinks: 8}      # also gravity_m_s2, and start: previous or straight
+    model: {dof: 1, sublinks: 8}      # also gravity_m_s2, start: previous or straight,
+                                      # and twist_stability: true (dof 1)
     points_of_interest_m: [0.007, 0.021, 0.035]   # optional (beyond DESIGN.md): arc lengths
     vary:                             # a grid {from, to, count} or a list of values
       magnetisation_deg.0: {from: 0, to: 345, count: 24}
@@ -15,12 +16,18 @@ A design study file (../shared/DESIGN.md, "Design studies"): what is fixed, what
 
 Varied names: ``magnetisation_deg.K`` (segment K's magnetisation direction, at that angle in
 its link x-y plane, deg, with the tentacle file's remanence) and ``field_t.x``, ``.y``,
-``.z`` (tesla, world frame); and what makes the tentacle itself (STRUCTURAL):
+``.z`` (tesla, world frame), or ``field_angle_deg`` with ``field_strength_t`` (the field in
+the base's plane, at that angle from the base direction towards its normal, deg, and that
+strong, T: both vary, or neither; a one-value list fixes one); and what makes the tentacle
+itself (STRUCTURAL):
 ``youngs_modulus_pa.K`` (segment K's modulus, Pa, bending and twist alike),
 ``bend_modulus_pa.K`` and ``twist_modulus_pa.K`` (its bending moduli, or its twist one:
 the pseudo-moduli of a reinforced segment), ``remanence_t.K`` (its remanence along its
 file's direction, T), ``length_m.K`` (m), ``inserted_m`` and ``backbone_m`` (how far the
-backbone reaches past the base, m; a tentacle with a backbone). A grid is every
+backbone reaches past the base, m; a tentacle with a backbone); ``fibre_angle_deg``,
+``fibre_modulus_pa`` and ``fibre_diameter_m`` (a reinforced segment's fibres: to its axis,
+deg, their Young's modulus, Pa, and diameter, m; ``.K`` segment K's, without it every
+reinforced segment's: tentacle_model.reinforcement). A grid is every
 combination, the last name varying fastest, so that neighbouring points are warm starts for
 each other; a Latin hypercube or random sample draws N points: a range uniformly between
 its ends (its count is the grid's only), a list one of its values. ``points_of_interest_m``
@@ -36,7 +43,10 @@ length, field and model the scene's) varies ``youngs_modulus_pa.K``, ``bend_modu
 before, as a rig sweeping its field goes; ``straight`` solves each from the straight body,
 a tentacle of its own with its field switched on: where several equilibria are stable, the
 one a point lands in then does not depend on its neighbours (a 3-DoF point takes more
-Newton steps so).
+Newton steps so). ``model.twist_stability: true`` (beyond DESIGN.md; dof 1) adds the column
+``twist_stability``: the smallest eigenvalue of the 3-DoF stiffness at each planar
+equilibrium, N m / rad^2; below zero the planar shape twists out of its plane (thesis
+chapter 4's instability), nan where the point's magnets or field leave the plane.
 """
 
 from dataclasses import dataclass
@@ -53,10 +63,14 @@ import yaml
 MAX_FILE_BYTES = 64 * 1024
 SEGMENT_NAMES = ('magnetisation_deg', 'youngs_modulus_pa', 'bend_modulus_pa',
                  'twist_modulus_pa', 'remanence_t', 'length_m')
+FIBRE_NAMES = ('fibre_angle_deg', 'fibre_modulus_pa', 'fibre_diameter_m')
+"""A reinforced segment's fibres: .K segment K's, or without .K every reinforced one's."""
+FIELD_POLAR = ('field_angle_deg', 'field_strength_t')
 STRUCTURAL = ('youngs_modulus_pa', 'bend_modulus_pa', 'twist_modulus_pa', 'remanence_t',
-              'length_m', 'inserted_m', 'backbone_m')
+              'length_m', 'inserted_m', 'backbone_m', *FIBRE_NAMES)
 """Name kinds that change the tentacle (its chain) from point to point."""
-POSITIVE = ('youngs_modulus_pa', 'bend_modulus_pa', 'twist_modulus_pa', 'length_m')
+POSITIVE = ('youngs_modulus_pa', 'bend_modulus_pa', 'twist_modulus_pa', 'length_m',
+            'fibre_modulus_pa', 'fibre_diameter_m')
 MAX_POINTS = 10_000_000   # a study's points; each needs its row of every column in memory
 AXES = {'x': 0, 'y': 1, 'z': 2}
 
@@ -122,6 +136,7 @@ class Study:
     sample: tuple            # ('grid', None, None) or (kind, count, seed)
     points_of_interest_m: tuple = ()   # arc lengths from the base, m
     warm: bool = True        # model.start: previous (True) or straight
+    twist: bool = False      # model.twist_stability: the twist_stability column (dof 1)
     scene: object = None     # a plan study's Scene (tentacle_planner.scene)
 
     @property
@@ -198,7 +213,7 @@ def load_study(path):
                                   f'({tentacle.length_m:g} m)')
     field = reader.vector(doc.get('field_t', [0.0, 0.0, 0.0]), 'field_t')
     model = reader.mapping(doc.get('model', {}), 'model',
-                           ('dof', 'sublinks', 'gravity_m_s2', 'start'))
+                           ('dof', 'sublinks', 'gravity_m_s2', 'start', 'twist_stability'))
     dof = model.get('dof', 3)
     if dof not in (1, 3) or isinstance(dof, bool):
         reader.fail('model.dof', f'{dof!r} is not 1 or 3')
@@ -209,6 +224,9 @@ def load_study(path):
     start = model.get('start', 'previous')
     if start not in ('previous', 'straight'):
         reader.fail('model.start', f"{start!r} is not 'previous' or 'straight'")
+    twist = reader.flag(model.get('twist_stability', False), 'model.twist_stability')
+    if twist and dof != 1:
+        reader.fail('model.twist_stability', "that of a planar equilibrium: give 'dof: 1'")
     varied = _varied(reader, doc['vary'], tentacle)
     if any(v.name == 'seed' for v in varied):
         reader.fail('vary.seed', 'only a plan study (compute: plan) has a seed: an equilibrium '
@@ -233,14 +251,14 @@ def load_study(path):
                                                       f'{least_inserted:g} m')
     study = Study(str(doc['name']), compute, path, hashlib.sha256(data).hexdigest(), tentacle,
                   inserted, field, dof, sublinks, gravity, varied, sample, interest,
-                  start == 'previous')
+                  start == 'previous', twist)
     if study.size > MAX_POINTS:
         reader.fail('vary', f'{study.size} points: at most {MAX_POINTS}')
     return study
 
 
 PLAN_NAMES = ('youngs_modulus_pa', 'bend_modulus_pa', 'twist_modulus_pa', 'remanence_t',
-              'seed')
+              *FIBRE_NAMES, 'seed')
 
 
 def _plan_study(reader, doc, path, data):
@@ -261,7 +279,8 @@ def _plan_study(reader, doc, path, data):
         if str(name).partition('.')[0] not in PLAN_NAMES:
             reader.fail(f'vary.{name}', 'a plan study varies youngs_modulus_pa.K, '
                                         'bend_modulus_pa.K, twist_modulus_pa.K, '
-                                        'remanence_t.K (segment K) or seed')
+                                        'remanence_t.K (segment K), fibre_angle_deg, '
+                                        'fibre_modulus_pa, fibre_diameter_m or seed')
     varied = _varied(reader, vary, scene.tentacle)
     sample = _sample(reader, doc.get('sample', 'grid'), varied)
     settings = scene.model
@@ -291,13 +310,19 @@ def _varied(reader, vary, tentacle):
                 reader.fail(where, f'segment {which} is not magnetised: it has no direction')
         elif kind == 'seed' and not which:
             pass
+        elif kind in FIBRE_NAMES:
+            _check_reinforced(reader, where, tentacle, which)
+        elif kind in FIELD_POLAR and not which:
+            pass
         elif kind == 'backbone_m' and tentacle.backbone is None:
             reader.fail(where, 'the tentacle has no backbone (its file has no backbone: block)')
         elif not (kind == 'field_t' and which in AXES) and not (
                 kind in ('inserted_m', 'backbone_m') and not which):
             reader.fail(where, 'unknown name: magnetisation_deg.K, youngs_modulus_pa.K, '
                                'bend_modulus_pa.K, twist_modulus_pa.K, remanence_t.K, '
-                               'length_m.K (segment K), field_t.x, .y, .z, inserted_m or '
+                               'length_m.K (segment K), fibre_angle_deg, fibre_modulus_pa, '
+                               'fibre_diameter_m (.K or every reinforced segment), field_t.x, '
+                               '.y, .z, field_angle_deg with field_strength_t, inserted_m or '
                                'backbone_m')
         if isinstance(spec, list):
             if not spec:
@@ -314,15 +339,51 @@ def _varied(reader, vary, tentacle):
         out.append(_checked(reader, where, kind, Varied(
             str(name), None, reader.number(spec['from'], f'{where}.from', False),
             reader.number(spec['to'], f'{where}.to', False), count)))
+    kinds = {v.name.partition('.')[0] for v in out}
+    if len(kinds & set(FIELD_POLAR)) == 1 or (kinds & set(FIELD_POLAR) and 'field_t' in kinds):
+        reader.fail('vary', 'field_angle_deg and field_strength_t vary together (a one-value '
+                            'list fixes one), and without field_t.x, .y, .z')
+    for v in out:
+        if v.name.startswith('fibre_diameter_m'):
+            for k in _reinforced(tentacle, v.name.partition('.')[2]):
+                segment = tentacle.segments[k]
+                if segment.reinforcement.radius_m + v.most / 2 > segment.radius_m:
+                    reader.fail(f'vary.{v.name}', f'{v.most:g} m: segment {k}\'s fibres on '
+                                                  f'{segment.reinforcement.radius_m:g} m '
+                                                  'would stand outside its section')
     return tuple(out)
+
+
+def _reinforced(tentacle, which):
+    """Return the segments a fibre name with suffix which ('K' or '') changes."""
+    if which:
+        return [int(which)]
+    return [k for k, s in enumerate(tentacle.segments) if s.reinforcement is not None]
+
+
+def _check_reinforced(reader, where, tentacle, which):
+    """Refuse a fibre name whose segment (or, without .K, the tentacle) has no fibres."""
+    if which and (not which.isdigit() or int(which) >= len(tentacle.segments)):
+        reader.fail(where, f'segment {which!r}: the tentacle has segments 0 to '
+                           f'{len(tentacle.segments) - 1}')
+    if which and tentacle.segments[int(which)].reinforcement is None:
+        reader.fail(where, f'segment {which} has no reinforcement (a reinforcement: block in '
+                           'its tentacle file)')
+    if not _reinforced(tentacle, which):
+        reader.fail(where, 'the tentacle has no reinforced segment (a reinforcement: block '
+                           'in a segment of its file)')
 
 
 def _checked(reader, where, kind, varied):
     """Return varied, its values in the name's range (a modulus or length above zero...)."""
     if kind in POSITIVE and varied.least <= 0:
         reader.fail(where, f'{varied.least:g}: a {kind} must be above zero')
-    if kind in ('remanence_t', 'inserted_m', 'backbone_m') and varied.least < 0:
+    if kind in ('remanence_t', 'inserted_m', 'backbone_m', 'field_strength_t') \
+            and varied.least < 0:
         reader.fail(where, f'{varied.least:g}: a {kind} cannot be negative')
+    if kind == 'fibre_angle_deg' and not 0 <= varied.least <= varied.most <= 90:
+        reader.fail(where, f'{varied.least:g} to {varied.most:g}: a fibre angle to the axis is '
+                           'from 0 to 90 deg')
     if kind == 'seed' and (varied.values is None or varied.least < 0 or any(
             v != int(v) for v in varied.values)):
         reader.fail(where, 'seeds are a list of whole numbers from 0')

@@ -19,9 +19,10 @@ import argparse
 import sys
 import time
 
+import numpy as np
 import pyarrow.csv as pa_csv
 from tentacle_studies import engines
-from tentacle_studies.plot import plot_table
+from tentacle_studies.plot import FIELD_POLAR, least_over_fields, plot_table
 from tentacle_studies.results import Results, ResultsError
 from tentacle_studies.study import load_study, StudyError
 from tqdm import tqdm
@@ -126,7 +127,23 @@ def main(args=None):
     print(f'{study.name}: {table.num_rows} points in {results.table_dir} ({todo} computed in '
           f'{seconds:.1f} s, {todo / max(seconds, 1e-9):.1f} a second); {outcome}'
           + (f'; {drawn}' if drawn else ''))
+    others = [n for n in study.names if n not in FIELD_POLAR]
+    if study.twist and len(others) == 1:
+        print(least_stable_value(table, others[0]))
     return 0
+
+
+def least_stable_value(table, name):
+    """Return a line naming the least value of name at which no field twists the tentacle."""
+    keys, least = least_over_fields(table, name)
+    stable = np.flatnonzero(least > 0)
+    if not stable.size:
+        return f'no {name} studied keeps the planar shape stable at every field'
+    if stable[0] == 0:
+        return f'every {name} studied keeps the planar shape stable at every field'
+    return (f'the least {name} that keeps the planar shape stable at every field: '
+            f'{keys[stable[0]]:g} (least twist stability {least[stable[0]]:.3g} N m/rad^2; '
+            f'{keys[stable[0] - 1]:g} twists at some)')
 
 
 if __name__ == '__main__':

@@ -1,6 +1,8 @@
 """
-Fibre reinforcement as pseudo-moduli: the closed form against fibres strained one by one,
-against the trends thesis chapter 4 found in FE, and in the model.
+Fibre reinforcement as pseudo-moduli.
+
+The closed form against fibres strained one by one, against the trends thesis chapter 4
+found in FE, and in the model.
 """
 
 import math
@@ -43,7 +45,8 @@ def fibre_energy_j(r, displace, length_m=0.02, samples=200_000):
     total = 0.0
     for f in range(r.fibres):
         hand = 1 if f % 2 == 0 else -1   # half left-, half right-handed
-        phi = 2 * math.pi * (f // 2) / (r.fibres // 2) + hand * x * math.tan(r.angle_rad) / r.radius_m
+        phi = (2 * math.pi * (f // 2) / (r.fibres // 2)
+               + hand * x * math.tan(r.angle_rad) / r.radius_m)
         p = np.column_stack([x, r.radius_m * np.cos(phi), r.radius_m * np.sin(phi)])
         q = p + displace(p)
         rest = np.linalg.norm(np.diff(p, axis=0), axis=1)
@@ -85,7 +88,7 @@ def test_a_braid_scissors_in_bending_and_holds_in_twist():
 
 
 def test_the_thesis_trends_in_fibre_angle():
-    """Figure 4.4A: bend:twist rises with the fibre angle, falls past ~85 deg; unit gradient at 85."""
+    """Figure 4.4A: bend:twist rises with fibre angle, falls past ~85 deg; unit gradient at 85."""
     angles = np.linspace(30.0, 89.5, 1200)
     bend, twist = np.array([relative(helix(a)) for a in angles]).T
     ratio = bend / twist
@@ -113,8 +116,8 @@ def test_the_braid_of_chapter_five_is_near_its_measured_pseudo_moduli():
     braid = helix(45.0, 16, 2.5e9, 1e-4, 'braid', 0.45e-3)
     bend, _, twist = np.array(pseudo_moduli((1e5, 1e5, 1e5), (i, i), 2 * i, braid)) / 1e5
     assert 2.5 <= bend <= 10.0 and 50.0 <= twist <= 200.0
-    bonded = np.array(pseudo_moduli((1e5,) * 3, (i, i), 2 * i, helix(45.0, 16, 2.5e9, 1e-4,
-                                                                      radius=0.45e-3))) / 1e5
+    bonded = helix(45.0, 16, 2.5e9, 1e-4, radius=0.45e-3)
+    bonded = np.array(pseudo_moduli((1e5,) * 3, (i, i), 2 * i, bonded)) / 1e5
     assert bonded[2] / bonded[0] < 2.0
 
 

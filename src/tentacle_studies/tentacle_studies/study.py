@@ -348,7 +348,7 @@ def _varied(reader, vary, tentacle):
             for k in _reinforced(tentacle, v.name.partition('.')[2]):
                 segment = tentacle.segments[k]
                 if segment.reinforcement.radius_m + v.most / 2 > segment.radius_m:
-                    reader.fail(f'vary.{v.name}', f'{v.most:g} m: segment {k}\'s fibres on '
+                    reader.fail(f'vary.{v.name}', f"{v.most:g} m: segment {k}'s fibres on "
                                                   f'{segment.reinforcement.radius_m:g} m '
                                                   'would stand outside its section')
     return tuple(out)

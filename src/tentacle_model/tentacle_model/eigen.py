@@ -1,11 +1,14 @@
 """
-The smallest eigenvalue of a small symmetric matrix, without the rest of its spectrum.
+Small symmetric matrices: Cholesky, and the smallest eigenvalue without the rest of the spectrum.
 
 A stability is a Hessian's smallest eigenvalue. LAPACK's whole spectrum (numba's eigvalsh,
-dsyevd) takes 8 us for a 15 x 15 matrix: 40% of a 5-link 3-DoF equilibrium in batch. Here:
+dsyevd) takes 8 us for a 15 x 15 matrix: 40% of a 5-link 3-DoF equilibrium in batch. lowest:
 Householder reduction to tridiagonal form (LAPACK's own first step), then the tridiagonal's
 smallest eigenvalue by Laguerre's method on its characteristic polynomial (tridiagonal_
-lowest), guarded by Sturm counts: the root to round-off of the matrix's norm, as LAPACK's.
+lowest), guarded by Sturm counts: the root to round-off of the matrix's norm, as LAPACK's
+(3.1 us at 15 x 15). A few Lanczos steps from a neighbouring point's eigenvector were tried in
+its place: a batch's Hessians have stiff modes far above the soft ones, and from a start 1e-4
+off the eigenvector four steps leave a residual 10^3 times too large to certify the value.
 """
 
 import numba
@@ -63,7 +66,7 @@ def tridiagonal(h):
 
 
 @numba.njit(cache=True, error_model='numpy')   # a zero divide is inf, not an exception
-def tridiagonal_lowest(diagonal, off):
+def tridiagonal_lowest(diagonal, off, below=np.nan):
     """
     Return the smallest eigenvalue of a symmetric tridiagonal matrix.
 
@@ -76,6 +79,8 @@ def tridiagonal_lowest(diagonal, off):
 
     :param diagonal: (n,) diagonal
     :param off: (n - 1,) off-diagonal
+    :param below: a guess just below the eigenvalue (a neighbouring matrix's, less a margin):
+        Laguerre starts there if a Sturm count says it is below (else at Gershgorin's bound)
     """
     n = len(diagonal)
     lo, hi = np.inf, -np.inf
@@ -89,6 +94,8 @@ def tridiagonal_lowest(diagonal, off):
     if hi - lo <= close:   # a multiple of the identity, to round-off
         return lo
     x = lo
+    if lo < below < hi and _count_below(diagonal, off, below, tiny) == 0:
+        x = lo = below
     for _ in range(MAX_PASSES):
         pivot, first, second = 1.0, 0.0, 0.0
         below, g, curvature = 0, 0.0, 0.0
@@ -122,8 +129,66 @@ def tridiagonal_lowest(diagonal, off):
     return 0.5 * (lo + hi)
 
 
+@numba.njit(cache=True, error_model='numpy')
+def _count_below(diagonal, off, x, tiny):
+    """Return how many eigenvalues of the tridiagonal lie below x (Sturm: negative pivots)."""
+    below = 0
+    pivot = 1.0
+    for i in range(diagonal.shape[0]):
+        pivot = diagonal[i] - x - (off[i - 1] ** 2 / pivot if i > 0 else 0.0)
+        if pivot == 0.0:
+            pivot = -tiny
+        if pivot < 0.0:
+            below += 1
+    return below
+
+
 @numba.njit(cache=True)
-def lowest(h):
-    """Return the smallest eigenvalue of a symmetric H (n, n)."""
+def lowest(h, below=np.nan):
+    """Return the smallest eigenvalue of a symmetric H (n, n); below: tridiagonal_lowest's."""
     diagonal, off = tridiagonal(h)
-    return tridiagonal_lowest(diagonal, off)
+    return tridiagonal_lowest(diagonal, off, below)
+
+
+@numba.njit(cache=True)
+def cholesky_solve(factor, g):
+    """Return x with L L^T x = g for a lower Cholesky factor L."""
+    size = g.shape[0]
+    x = np.empty(size)
+    for i in range(size):   # L y = g, y in x
+        total = g[i]
+        for k in range(i):
+            total -= factor[i, k] * x[k]
+        x[i] = total / factor[i, i]
+    for i in range(size - 1, -1, -1):   # L^T x = y, in place: x[i] needs y[i] and x[k > i]
+        total = x[i]
+        for k in range(i + 1, size):
+            total -= factor[k, i] * x[k]
+        x[i] = total / factor[i, i]
+    return x
+
+
+@numba.njit(cache=True)
+def cholesky(h):
+    """
+    Return (L, True) with L L^T = H, L lower; (_, False) where H is not positive definite.
+
+    Written out: numba's LAPACK dpotrf copies and checks its input, a third of a 15 x 15
+    factorisation's time (a 3-DoF solve factorises some three a point).
+    """
+    n = h.shape[0]
+    factor = np.zeros((n, n))
+    for j in range(n):
+        total = h[j, j]
+        for k in range(j):
+            total -= factor[j, k] * factor[j, k]
+        if not total > 0.0:   # NaN too, as dpotrf
+            return factor, False
+        pivot = np.sqrt(total)
+        factor[j, j] = pivot
+        for i in range(j + 1, n):
+            total = h[i, j]
+            for k in range(j):
+                total -= factor[i, k] * factor[j, k]
+            factor[i, j] = total / pivot
+    return factor, True

@@ -23,31 +23,23 @@ RUNNING, CONVERGED, NON_FINITE, OUT_OF_ITERATIONS, LINE_SEARCH_FAILED, AT_ROUND_
 
 
 @numba.njit(cache=True)
-def _cholesky_solve(factor, g):
-    """Return x with L L^T x = g for a lower Cholesky factor L."""
-    size = g.shape[0]
-    y = np.empty(size)
-    for i in range(size):
-        total = g[i]
-        for k in range(i):
-            total -= factor[i, k] * y[k]
-        y[i] = total / factor[i, i]
-    x = np.empty(size)
-    for i in range(size - 1, -1, -1):
-        total = y[i]
-        for k in range(i + 1, size):
-            total -= factor[k, i] * x[k]
-        x[i] = total / factor[i, i]
-    return x
+def _max_abs(v):
+    """Return max |v_i| of a 1-D v, in one pass (no temporary); nan if any is, as np.max."""
+    largest = 0.0
+    for i in range(v.shape[0]):
+        size = abs(v[i])
+        if size != size:
+            return np.nan
+        largest = max(largest, size)
+    return largest
 
 
 @numba.njit(cache=True)
 def _newton_step(h, g):
     """Return -H^-1 g, shifting an indefinite H just past positive (statics' rule)."""
-    try:
-        return -_cholesky_solve(np.linalg.cholesky(h), g)
-    except Exception:  # not positive definite
-        pass
+    factor, positive = eigen.cholesky(h)
+    if positive:
+        return -eigen.cholesky_solve(factor, g)
     lowest = np.linalg.eigvalsh(h)[0]
     shift = -lowest + 1e-6 * max(np.max(np.abs(np.diag(h))), 1e-300)
     return -np.linalg.solve(h + shift * np.eye(g.shape[0]), g)
@@ -64,17 +56,36 @@ def minimise(x, base_rotation, base_position, lengths, moments, levers, stiffnes
     steps are spent, call again from x with the iterations and escapes returned); stability
     the smallest Hessian eigenvalue where status is CONVERGED, else nan.
     """
+    return minimise_state(x, base_rotation, base_position, lengths, moments, levers,
+                          stiffness, field, gravity, tol, k_floor, max_iterations, iterations,
+                          escapes, steps, max_step_rad, max_escapes, escape_step_rad,
+                          np.nan)[:6]
+
+
+@numba.njit(cache=True)
+def minimise_state(x, base_rotation, base_position, lengths, moments, levers, stiffness,
+                   field, gravity, tol, k_floor, max_iterations, iterations, escapes, steps,
+                   max_step_rad, max_escapes, escape_step_rad, stability_near):
+    """
+    Return minimise's values, then spatial._evaluate's tuple at the x returned (its Hessian in).
+
+    A batch takes the tip (and, where round-off ended the search, the stability) from it
+    rather than evaluating the chain once more; stability_near (a neighbouring point's, or
+    nan) starts the search for this one's.
+    """
     done = 0
     n = x.shape[0] // 3
     state = _evaluate(x.reshape(n, 3), base_rotation, base_position, lengths, moments,
                       levers, stiffness, field, gravity, True)
     while True:
         energy, g, h, largest = state[3], state[4].reshape(-1), state[5], state[8]
-        residual = np.max(np.abs(g)) / max(largest, k_floor)
+        largest_g = _max_abs(g)
+        residual = largest_g / max(largest, k_floor)
         if not np.isfinite(residual):
-            return x, NON_FINITE, iterations, escapes, residual, np.nan
+            return x, NON_FINITE, iterations, escapes, residual, np.nan, state
         if residual <= tol:
-            lowest = eigen.lowest(h)   # 3 us where LAPACK's whole spectrum takes 8
+            # 3 us where LAPACK's whole spectrum takes 8; from just below a neighbour's, less
+            lowest = eigen.lowest(h, stability_near - 0.1 * abs(stability_near))
             diag_scale = np.max(np.abs(np.diag(h)))
             if lowest < -1e-9 * diag_scale and escapes < max_escapes:
                 escapes += 1
@@ -85,23 +96,26 @@ def minimise(x, base_rotation, base_position, lengths, moments, levers, stiffnes
                 state = _evaluate(x.reshape(n, 3), base_rotation, base_position, lengths,
                                   moments, levers, stiffness, field, gravity, True)
                 continue
-            return x, CONVERGED, iterations, escapes, residual, lowest
+            return x, CONVERGED, iterations, escapes, residual, lowest, state
         if iterations >= max_iterations:
-            return x, OUT_OF_ITERATIONS, iterations, escapes, residual, np.nan
+            return x, OUT_OF_ITERATIONS, iterations, escapes, residual, np.nan, state
         if done >= steps:
-            return x, RUNNING, iterations, escapes, residual, np.nan
+            return x, RUNNING, iterations, escapes, residual, np.nan, state
         iterations += 1
         done += 1
         step = _newton_step(h, g)
-        biggest = np.max(np.abs(step))
+        biggest = _max_abs(step)
         if biggest > max_step_rad:
             step = step * (max_step_rad / biggest)
-        slope = g @ step
-        largest_g = np.max(np.abs(g))
+        slope = 0.0
+        for i in range(step.shape[0]):   # not g @ step: BLAS' call costs more than 15 terms
+            slope += g[i] * step[i]
         alpha = 1.0
         accepted = False
         while alpha > 1e-12:
-            trial = x + alpha * step
+            trial = np.empty_like(x)
+            for i in range(x.shape[0]):
+                trial[i] = x[i] + alpha * step[i]
             # the full step is nearly always taken: its Hessian is the next iteration's
             trial_state = _evaluate(trial.reshape(n, 3), base_rotation, base_position,
                                     lengths, moments, levers, stiffness, field, gravity,
@@ -117,7 +131,7 @@ def minimise(x, base_rotation, base_position, lengths, moments, levers, stiffnes
             alpha *= 0.5
         if not accepted:
             status = AT_ROUND_OFF if residual <= 1e3 * tol else LINE_SEARCH_FAILED
-            return x, status, iterations, escapes, residual, np.nan
+            return x, status, iterations, escapes, residual, np.nan, state
         x = trial
         state = trial_state if alpha == 1.0 else _evaluate(
             x.reshape(n, 3), base_rotation, base_position, lengths, moments, levers,

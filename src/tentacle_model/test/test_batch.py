@@ -71,3 +71,39 @@ def test_refuses_what_it_cannot_solve(braided):
         batch.solve(chain, np.zeros((2, segments + 1, 3)), np.zeros((2, 3)))
     with pytest.raises(ValueError, match='finite'):
         batch.solve(chain, np.zeros((1, segments, 3)), np.full((1, 3), np.nan))
+
+
+def test_along_an_even_run_each_point_starts_where_its_neighbours_point(braided):
+    """A grid's run: the solutions before extrapolated (a parabola, a line); a new row: none."""
+    model = TentacleModel(braided, dof=3, gravity_m_s2=[0.0, 0.0, -9.81])
+    chain = model.chain(braided.length_m)
+    row = np.radians(np.arange(0.0, 360.0, 15.0))
+    angles = np.concatenate([row, row + 0.1])   # two rows of 24: the second starts afresh
+    directions = np.repeat(np.array([[1.0, 0.0, 0.0]] * len(braided.segments))[None],
+                           len(angles), axis=0)
+    directions[:, -1] = np.column_stack([np.cos(angles), np.sin(angles), 0 * angles])
+    fields = np.tile([0.0, 0.005, 0.0], (len(angles), 1))
+    got = batch.solve(chain, directions, fields, model.gravity_m_s2, dof=3, tol=model.tol,
+                      max_iterations=model.max_iterations)
+    magnitudes = np.linalg.norm(chain.moments_a_m2, axis=1)
+    solved, previous_iterations = [], 0
+    for p in range(len(angles)):
+        along = p % len(row)   # its place in its row
+        if along >= 3:
+            start = 3 * (solved[-1] - solved[-2]) + solved[-3]
+        elif along == 2:
+            start = 2 * solved[-1] - solved[-2]
+        else:
+            start = solved[-1] if solved else None
+        moments = magnitudes[:, None] * directions[p][chain.segment_index]
+        solution = model.solve(braided.length_m, fields[p], start, moments)
+        eq = solution.equilibrium
+        # its start is extrapolated from statics' solutions, which differ from the batch's
+        # by round-off within the tolerance: so do the two answers
+        np.testing.assert_allclose(got.tips_m[p], eq.points_m[-1], rtol=0, atol=1e-9)
+        assert abs(got.iterations[p] - eq.iterations) <= 1   # a residual at the tolerance
+        previous_iterations += model.solve(braided.length_m, fields[p], solved[-1] if solved
+                                           else None, moments).equilibrium.iterations
+        solved.append(solution.state)
+    assert got.converged.all()
+    assert got.iterations.sum() < previous_iterations   # what the prediction is for

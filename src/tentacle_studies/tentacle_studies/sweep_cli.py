@@ -30,7 +30,7 @@ from tqdm import tqdm
 DEFAULT_CHUNK_POINTS = 8000   # points a chunk: a file each, and what Ctrl-C may lose
 DEFAULT_PLAN_CHUNK_POINTS = 2   # a plan is about a second: chunks of two share the cores
 # Fewer points than this stay in this process unless --workers says otherwise: starting a
-# LocalCluster takes about 2 s, and this process solves some 70,000 points a second (5-link
+# LocalCluster takes about 2 s, and this process solves some 100,000 points a second (5-link
 # 3-DoF tentacle; bench/sweep_scale.py).
 LOCAL_WORKERS_FROM_POINTS = 200_000
 # Plan studies likewise: on this 2-vCPU machine two workers planned 16 plans of ch3_a in

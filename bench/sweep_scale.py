@@ -5,10 +5,11 @@ Benchmark: design studies' equilibria per second, in batch and one by one, here 
 First one core: the chapter 5 braided tentacle (5 links; 3-DoF and planar joints) over a
 grid of its two distal magnets' angles (24 x 24, repeated), tentacle_model.batch against
 one TentacleModel.solve a point, side by side. Then tentacle-sweep's engines on a study of
-518,400 points (100 fields x 72 x 72 angles, 3-DoF): in this process and on a LocalCluster of
-2 single-threaded workers, at 2000, 8000 and 32000 points a chunk (the cluster's start
-included: it is what a run pays); and a plan study (16 seeds of thesis scene ch3_a, a plan
-each) at 1, 2, 4 and 8 points a chunk.
+518,400 points (100 fields x 72 x 72 angles, 3-DoF): in this process, on a LocalCluster of
+2 single-threaded workers (its start included: it is what a run pays) and on a Dask cluster
+of 2 workers already running (a scheduler and 2 worker processes, as a lab's, reached by
+--scheduler), at 2000, 8000 and 32000 points a chunk; and a plan study (16 seeds of thesis
+scene ch3_a, a plan each) at 1, 2, 4 and 8 points a chunk.
 
 Run: .venv/bin/python bench/sweep_scale.py
 """
@@ -25,7 +26,7 @@ import numpy as np  # noqa: E402
 from tentacle_model import batch  # noqa: E402
 from tentacle_model.model import TentacleModel  # noqa: E402
 from tentacle_model.tentacle_spec import load_tentacle  # noqa: E402
-from tentacle_studies import sweep_cli  # noqa: E402
+from tentacle_studies import engines as studies_engines, sweep_cli  # noqa: E402
 
 TENTACLE = ROOT / 'config' / 'tentacles' / 'braided_chapter5.yaml'
 STUDY = f"""name: sweep_scale
@@ -84,21 +85,28 @@ def one_core():
 
 
 def engines(text, points, chunks, what):
-    """Print tentacle-sweep's points per second here and on 2 local workers, by chunk size."""
+    """
+    Print tentacle-sweep's points per second by chunk size, here and on two Dask clusters.
+
+    On 2 local workers (a LocalCluster the run starts) and on a Dask cluster of 2 workers
+    already running (a scheduler and worker processes, as a lab's: --scheduler).
+    """
     print(f'tentacle-sweep, {points:,} {what}, wall time of the run:')
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp, \
+            studies_engines.cluster_processes(tmp, workers=2) as address:
         study = pathlib.Path(tmp) / 'study.yaml'
         study.write_text(text)
         for chunk in chunks:
-            for workers in (1, 2):
-                out = pathlib.Path(tmp) / f'out_{chunk}_{workers}'
+            for k, (where, argv) in enumerate((('this process', ['--workers', '1']),
+                                               ('2 local workers', ['--workers', '2']),
+                                               ('Dask cluster of 2', ['--scheduler', address]))):
+                out = pathlib.Path(tmp) / f'out_{chunk}_{k}'
                 t0 = time.perf_counter()
                 code = sweep_cli.main([str(study), '--out', str(out), '--chunk', str(chunk),
-                                       '--workers', str(workers)])
+                                       *argv])
                 seconds = time.perf_counter() - t0
                 assert code == 0
-                where = 'this process' if workers == 1 else '2 local workers'
-                print(f'  {chunk:5d} points a chunk, {where:15s}: {seconds:5.2f} s, '
+                print(f'  {chunk:5d} points a chunk, {where:17s}: {seconds:5.2f} s, '
                       f'{points / seconds:9.2f} points a second', flush=True)
 
 

@@ -9,9 +9,16 @@ chunks, and so the results, are the same: each chunk's first point starts straig
 """
 
 import contextlib
+import json
 import os
+import pathlib
+import subprocess
+import sys
+import time
 
 from tentacle_studies import equilibria
+
+PACKAGES = pathlib.Path(__file__).resolve().parents[2]   # src/: what a worker imports
 
 
 def solve_points(study, start, stop):
@@ -66,3 +73,56 @@ def dask(address=None, workers=None):
             finally:
                 client.cancel(list(futures))   # Ctrl-C: nothing left running on the cluster
         yield compute
+
+
+@contextlib.contextmanager
+def cluster_processes(folder, workers):
+    """
+    Start a Dask scheduler and its worker processes here, as a lab starts them; yield its address.
+
+    ``dask scheduler`` and ``dask worker --nworkers N --nthreads 1``, separate processes on
+    this machine with this checkout's packages on their path, their output in
+    folder/dask.log: a cluster for tests and benchmarks (a lab's runs elsewhere). Stopped,
+    every process, on leaving.
+
+    :raises RuntimeError: the scheduler or its workers not up within 60 s
+    """
+    dask = str(pathlib.Path(sys.executable).parent / 'dask')
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        str(p) for p in sorted(PACKAGES.iterdir()) if (p / 'package.xml').exists()))
+    folder = pathlib.Path(folder)
+    scheduler_file = folder / 'scheduler.json'
+    with open(folder / 'dask.log', 'w') as logs, contextlib.ExitStack() as stack:
+        def start(*argv):
+            process = subprocess.Popen([dask, *argv, '--no-dashboard'], env=env, stdout=logs,
+                                       stderr=logs)
+            stack.callback(_stop, process)
+            return process
+        start('scheduler', '--host', '127.0.0.1', '--port', '0', '--scheduler-file',
+              str(scheduler_file))
+        deadline = time.monotonic() + 60
+        while not scheduler_file.exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        if not scheduler_file.exists():   # once more at the deadline
+            raise RuntimeError(f'no Dask scheduler within 60 s: {folder / "dask.log"}')
+        start('worker', '--scheduler-file', str(scheduler_file), '--nworkers', str(workers),
+              '--nthreads', '1')
+        from distributed import Client
+        address = json.loads(scheduler_file.read_text())['address']
+        with Client(address) as client:
+            try:
+                client.wait_for_workers(workers, timeout=60)
+            except TimeoutError:
+                raise RuntimeError(f'{workers} Dask workers not up within 60 s: '
+                                   f'{folder / "dask.log"}') from None
+        yield address
+
+
+def _stop(process):
+    """Stop a process: terminate, then kill after 30 s."""
+    process.terminate()
+    try:
+        process.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.wait()

@@ -1,12 +1,6 @@
 """tentacle-sweep: each row the model's equilibrium; chunks kept on Ctrl-C, resumed once."""
 
-import contextlib
-import json
-import os
 import pathlib
-import subprocess
-import sys
-import time
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -123,56 +117,12 @@ def test_local_workers_and_a_real_cluster_give_the_same_table(write_study, tmp_p
         assert sweep_cli.main([str(path), '--out', str(tmp_path / name), '--chunk', '30',
                                *argv]) == 0
         tables[name] = pq.read_table(tmp_path / name / 'results.parquet')
-    with dask_cluster(tmp_path, workers=2) as address:
+    with engines.cluster_processes(tmp_path, workers=2) as address:
         assert sweep_cli.main([str(path), '--out', str(tmp_path / 'cluster'), '--chunk', '30',
                                '--scheduler', address]) == 0
     tables['cluster'] = pq.read_table(tmp_path / 'cluster' / 'results.parquet')
     assert tables['here'].num_rows == 144
     assert tables['local'].equals(tables['here']) and tables['cluster'].equals(tables['here'])
-
-
-@contextlib.contextmanager
-def dask_cluster(tmp_path, workers):
-    """Start a Dask scheduler and worker processes on this machine; yield its address."""
-    dask = str(pathlib.Path(sys.executable).parent / 'dask')
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        str(p) for p in sorted((ROOT / 'src').iterdir()) if (p / 'package.xml').exists()))
-    scheduler_file = tmp_path / 'scheduler.json'
-    logs = open(tmp_path / 'dask.log', 'w')
-    processes = [subprocess.Popen(
-        [dask, 'scheduler', '--host', '127.0.0.1', '--port', '0', '--no-dashboard',
-         '--scheduler-file', str(scheduler_file)], env=env, stdout=logs, stderr=logs)]
-    try:
-        assert wait_for(scheduler_file.exists, 60), (tmp_path / 'dask.log').read_text()
-        processes.append(subprocess.Popen(
-            [dask, 'worker', '--scheduler-file', str(scheduler_file), '--nworkers',
-             str(workers), '--nthreads', '1', '--no-dashboard'], env=env, stdout=logs,
-            stderr=logs))
-        from distributed import Client
-        address = json.loads(scheduler_file.read_text())['address']
-        with Client(address) as client:
-            client.wait_for_workers(workers, timeout=60)
-        yield address
-    finally:
-        for process in reversed(processes):
-            process.terminate()
-        for process in reversed(processes):
-            try:
-                process.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait()
-        logs.close()
-
-
-def wait_for(condition, timeout_s):
-    """Return whether condition() came true within timeout_s (checked once more at the end)."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.05)
-    return condition()
 
 
 def test_points_of_interest_lie_on_the_body(write_study, tmp_path):

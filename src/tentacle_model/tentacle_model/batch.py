@@ -8,7 +8,7 @@ loop over the points is compiled too, and each point starts from the one before 
 neighbour along the grid), so a solve is a few Newton steps. Along a run of points that step
 evenly (a grid's last name; 3-DoF joints) the solutions before are extrapolated to the next
 point, a parabola through three (a line through two), which saves a Newton step in some:
-10.3 us a point on a 24 x 24 grid of 15 deg steps, 100,000 a second (bench/sweep_scale.py).
+9.8 us a point on a 24 x 24 grid of 15 deg steps, 102,000 a second (bench/sweep_scale.py).
 
 The same minimisers as statics.solve (spatial_newton.minimise, planar_newton.minimise), the
 same tolerance and limits: a point solved here from a state is the point statics.solve finds

@@ -7,9 +7,9 @@ imported here only, when a plot is drawn: a cluster's workers never need it.
 """
 
 import numpy as np
+from tentacle_studies.study import FIELD_POLAR
 
 MAX_PLOTTED = 200_000   # points drawn at most (every k-th beyond): a map, not a census
-FIELD_POLAR = ('field_angle_deg', 'field_strength_t')
 
 
 def least_over_fields(table, name):

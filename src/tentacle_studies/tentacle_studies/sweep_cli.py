@@ -22,9 +22,9 @@ import time
 import numpy as np
 import pyarrow.csv as pa_csv
 from tentacle_studies import engines
-from tentacle_studies.plot import FIELD_POLAR, least_over_fields, plot_table
+from tentacle_studies.plot import least_over_fields, plot_table
 from tentacle_studies.results import Results, ResultsError
-from tentacle_studies.study import load_study, StudyError
+from tentacle_studies.study import FIELD_POLAR, load_study, StudyError
 from tqdm import tqdm
 
 DEFAULT_CHUNK_POINTS = 8000   # points a chunk: a file each, and what Ctrl-C may lose

@@ -302,9 +302,7 @@ def _varied(reader, vary, tentacle):
         where = f'vary.{name}'
         kind, _, which = str(name).partition('.')
         if kind in SEGMENT_NAMES:
-            if not which.isdigit() or int(which) >= len(tentacle.segments):
-                reader.fail(where, f'segment {which!r}: the tentacle has segments 0 to '
-                                   f'{len(tentacle.segments) - 1}')
+            _check_segment(reader, where, tentacle, which)
             if kind in ('magnetisation_deg', 'remanence_t') and not np.any(
                     tentacle.segments[int(which)].magnetisation_a_per_m):
                 reader.fail(where, f'segment {which} is not magnetised: it has no direction')
@@ -361,11 +359,17 @@ def _reinforced(tentacle, which):
     return [k for k, s in enumerate(tentacle.segments) if s.reinforcement is not None]
 
 
-def _check_reinforced(reader, where, tentacle, which):
-    """Refuse a fibre name whose segment (or, without .K, the tentacle) has no fibres."""
-    if which and (not which.isdigit() or int(which) >= len(tentacle.segments)):
+def _check_segment(reader, where, tentacle, which):
+    """Refuse a name's segment number which (its '.K') that the tentacle does not have."""
+    if not which.isdigit() or int(which) >= len(tentacle.segments):
         reader.fail(where, f'segment {which!r}: the tentacle has segments 0 to '
                            f'{len(tentacle.segments) - 1}')
+
+
+def _check_reinforced(reader, where, tentacle, which):
+    """Refuse a fibre name whose segment (or, without .K, the tentacle) has no fibres."""
+    if which:
+        _check_segment(reader, where, tentacle, which)
     if which and tentacle.segments[int(which)].reinforcement is None:
         reader.fail(where, f'segment {which} has no reinforcement (a reinforcement: block in '
                            'its tentacle file)')
